@@ -1,0 +1,41 @@
+//! Points + normals + neighbour graph of a 640×480 frame (the first stage of every frame).
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use depthpose::cloud::{neighbour_graph, normals_from_depth, Cloud, Connectivity, DepthView, NormalConfig};
+use depthpose::Camera;
+use std::hint::black_box;
+
+/// A 640×480 frame: a wall at 4 m with a body-sized blob of spheres in front at ~2.5 m.
+fn frame(cam: &Camera) -> Vec<f32> {
+    let mut d = vec![4.0f32; cam.width * cam.height];
+    for row in 0..cam.height {
+        for col in 0..cam.width {
+            let (x, y) = (col as f32 - 320.0, row as f32 - 240.0);
+            let r2 = (x / 90.0).powi(2) + (y / 200.0).powi(2);
+            if r2 < 1.0 {
+                d[row * cam.width + col] = 2.5 - 0.2 * (1.0 - r2).sqrt();
+            }
+            if (row * 7 + col * 13) % 97 == 0 {
+                d[row * cam.width + col] = 0.0; // dropouts
+            }
+        }
+    }
+    d
+}
+
+fn bench_cloud(c: &mut Criterion) {
+    let cam = Camera::kinect_v1();
+    let depth = frame(&cam);
+    let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+    c.bench_function("cloud_640x480_points_normals_graph8", |b| {
+        b.iter(|| {
+            let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
+            let normals = normals_from_depth(&view, &cam, &cloud, &NormalConfig::default());
+            let graph = neighbour_graph(&cloud, Connectivity::Eight);
+            black_box((cloud.len(), normals.len(), graph.len()))
+        })
+    });
+}
+
+criterion_group!(benches, bench_cloud);
+criterion_main!(benches);

@@ -1,0 +1,169 @@
+//! Pinhole camera: intrinsics, projection and back-projection.
+//!
+//! Camera frame: x right, y down, z forward (metres). Pixel (row v, column u) is centred
+//! at (u, v) and a point p projects to u = fx·x/z + cx, v = fy·y/z + cy.
+
+use crate::error::{ensure, ensure_positive, Result};
+use nalgebra::Vector3;
+
+/// Pinhole intrinsics plus the image size they belong to.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Camera {
+    pub fx: f64,
+    pub fy: f64,
+    pub cx: f64,
+    pub cy: f64,
+    pub width: usize,
+    pub height: usize,
+}
+
+impl Camera {
+    /// A validated camera: focal lengths positive, image non-empty, principal point
+    /// within a generous margin of the image (a centre far outside is a unit mistake).
+    pub fn new(fx: f64, fy: f64, cx: f64, cy: f64, width: usize, height: usize) -> Result<Self> {
+        ensure_positive(fx, "fx")?;
+        ensure_positive(fy, "fy")?;
+        ensure(width > 0 && height > 0, "width/height", || {
+            format!("image size must be positive, got {width}x{height}")
+        })?;
+        ensure(width <= 1 << 15 && height <= 1 << 15, "width/height", || {
+            format!("image size {width}x{height} is unreasonably large")
+        })?;
+        let (w, h) = (width as f64, height as f64);
+        ensure(cx.is_finite() && cx > -0.5 * w && cx < 1.5 * w, "cx", || {
+            format!("principal point cx={cx} does not fit an image {width} pixels wide")
+        })?;
+        ensure(cy.is_finite() && cy > -0.5 * h && cy < 1.5 * h, "cy", || {
+            format!("principal point cy={cy} does not fit an image {height} pixels high")
+        })?;
+        Ok(Camera {
+            fx,
+            fy,
+            cx,
+            cy,
+            width,
+            height,
+        })
+    }
+
+    /// Kinect v1 depth camera at 640×480 (f ≈ 580 px).
+    pub fn kinect_v1() -> Self {
+        Camera {
+            fx: 580.0,
+            fy: 580.0,
+            cx: 319.5,
+            cy: 239.5,
+            width: 640,
+            height: 480,
+        }
+    }
+
+    /// Kinect v1 depth camera downsampled to 320×240.
+    pub fn kinect_v1_qvga() -> Self {
+        Camera {
+            fx: 290.0,
+            fy: 290.0,
+            cx: 159.5,
+            cy: 119.5,
+            width: 320,
+            height: 240,
+        }
+    }
+
+    /// The ITOP data set's camera (320×240, f = 1/0.0035 ≈ 285.71 px), also used by the
+    /// shared synthetic sequences.
+    pub fn itop() -> Self {
+        Camera {
+            fx: 285.71,
+            fy: 285.71,
+            cx: 159.5,
+            cy: 119.5,
+            width: 320,
+            height: 240,
+        }
+    }
+
+    /// The same camera for an image resampled by `factor` (0.5 = half resolution).
+    pub fn scaled(&self, factor: f64) -> Result<Self> {
+        ensure_positive(factor, "factor")?;
+        let width = ((self.width as f64) * factor).round().max(1.0) as usize;
+        let height = ((self.height as f64) * factor).round().max(1.0) as usize;
+        Camera::new(
+            self.fx * factor,
+            self.fy * factor,
+            (self.cx + 0.5) * factor - 0.5,
+            (self.cy + 0.5) * factor - 0.5,
+            width,
+            height,
+        )
+    }
+
+    /// Checks that an image of `height`×`width` belongs to this camera.
+    pub fn check_image(&self, name: &str, height: usize, width: usize) -> Result<()> {
+        ensure(height == self.height && width == self.width, name, || {
+            format!(
+                "image is {height}x{width} (HxW) but the camera is {}x{}",
+                self.height, self.width
+            )
+        })
+    }
+
+    /// Pixel coordinates (u, v) of a camera-frame point; None behind the camera.
+    #[inline]
+    pub fn project(&self, p: &Vector3<f64>) -> Option<(f64, f64)> {
+        if p.z <= 0.0 {
+            return None;
+        }
+        Some((self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy))
+    }
+
+    /// The camera-frame point at pixel (u, v) with depth z.
+    #[inline]
+    pub fn back_project(&self, u: f64, v: f64, z: f64) -> Vector3<f64> {
+        Vector3::new((u - self.cx) * z / self.fx, (v - self.cy) * z / self.fy, z)
+    }
+
+    /// Unit viewing ray through pixel (u, v).
+    #[inline]
+    pub fn ray(&self, u: f64, v: f64) -> Vector3<f64> {
+        Vector3::new((u - self.cx) / self.fx, (v - self.cy) / self.fy, 1.0).normalize()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn project_inverts_back_project() {
+        let cam = Camera::new(300.0, 310.0, 150.0, 120.0, 320, 240).unwrap();
+        for &(u, v, z) in &[(0.0, 0.0, 1.0), (319.0, 239.0, 4.5), (12.5, 200.25, 0.3)] {
+            let p = cam.back_project(u, v, z);
+            let (u2, v2) = cam.project(&p).unwrap();
+            assert!((u - u2).abs() < 1e-9 && (v - v2).abs() < 1e-9);
+            assert!((p.z - z).abs() < 1e-12);
+        }
+        assert!(cam.project(&Vector3::new(0.0, 0.0, -1.0)).is_none());
+    }
+
+    #[test]
+    fn rejects_nonsense() {
+        assert!(Camera::new(0.0, 1.0, 1.0, 1.0, 10, 10).is_err());
+        assert!(Camera::new(f64::NAN, 1.0, 1.0, 1.0, 10, 10).is_err());
+        assert!(Camera::new(1.0, 1.0, 1.0, 1.0, 0, 10).is_err());
+        assert!(Camera::new(500.0, 500.0, 5000.0, 1.0, 10, 10).is_err());
+        let e = Camera::new(500.0, 500.0, 5.0, -100.0, 10, 10).unwrap_err();
+        assert!(e.to_string().starts_with("cy:"));
+    }
+
+    #[test]
+    fn scaling_keeps_rays() {
+        let cam = Camera::kinect_v1();
+        let half = cam.scaled(0.5).unwrap();
+        assert_eq!((half.width, half.height), (320, 240));
+        // The centre of full-res pixel block (2u..2u+1) maps to half-res pixel u.
+        let r1 = cam.ray(100.5, 60.5);
+        let r2 = half.ray(50.0, 30.0);
+        assert!((r1 - r2).norm() < 1e-9);
+    }
+}
