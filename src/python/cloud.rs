@@ -63,7 +63,9 @@ fn surface_normals<'py>(
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
     if radius == 0 || radius > 32 {
-        return Err(crate::Error::invalid("radius", format!("must be in 1..=32, got {radius}")).into());
+        return Err(
+            crate::Error::invalid("radius", format!("must be in 1..=32, got {radius}")).into(),
+        );
     }
     let normals = py.detach(|| -> PyResult<Vec<[f32; 3]>> {
         let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
@@ -75,7 +77,11 @@ fn surface_normals<'py>(
         Ok(normals_from_depth(&view, &camera.inner, &cloud, &cfg))
     })?;
     let n = normals.len();
-    Ok(to_numpy(py, normals.into_iter().flatten().collect(), &[n, 3]))
+    Ok(to_numpy(
+        py,
+        normals.into_iter().flatten().collect(),
+        &[n, 3],
+    ))
 }
 
 /// The neighbourhood graph between valid (masked) pixels: edges (E, 2) int32 of point
@@ -107,8 +113,8 @@ fn pixel_graph<'py>(
 
 /// The person's pixels (H, W) bool. See `depthpose.foreground_mask`.
 #[pyfunction]
-#[pyo3(signature = (depth, background=None, *, min_depth=0.3, max_depth=8.0, bg_tolerance=0.04,
-                    bg_tolerance_quadratic=0.006, max_step=0.12, min_component=40, large_share=0.3))]
+#[pyo3(signature = (depth, background=None, *, min_depth=0.3, max_depth=8.0, bg_tolerance=0.025,
+                    bg_tolerance_quadratic=0.003, max_step=0.25, min_component=40, large_share=0.3))]
 #[allow(clippy::too_many_arguments)]
 fn foreground_mask<'py>(
     py: Python<'py>,
@@ -123,7 +129,9 @@ fn foreground_mask<'py>(
     large_share: f32,
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
     let d = depth_array(depth, "depth")?;
-    let bg = background.map(|b| depth_array(b, "background")).transpose()?;
+    let bg = background
+        .map(|b| depth_array(b, "background"))
+        .transpose()?;
     let cfg = ForegroundConfig {
         min_depth,
         max_depth,
@@ -137,7 +145,12 @@ fn foreground_mask<'py>(
     let mask = py.detach(|| -> PyResult<Vec<bool>> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         let bgv = match &bg {
-            Some(b) => Some(DepthView::new(&b.data, b.shape[0], b.shape[1], "background")?),
+            Some(b) => Some(DepthView::new(
+                &b.data,
+                b.shape[0],
+                b.shape[1],
+                "background",
+            )?),
             None => None,
         };
         Ok(fg_mask(&view, bgv.as_ref(), &cfg)?)
