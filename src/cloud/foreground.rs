@@ -346,7 +346,9 @@ mod tests {
         let depth = img(h, w, |r, c| {
             if (10..50).contains(&r) && (30..50).contains(&c) {
                 if r == 30 && c == 40 {
-                    0.0 // a hole inside the body
+                    0.0 // a sensor dropout on the body: part of the silhouette
+                } else if (20..24).contains(&r) && (35..38).contains(&c) {
+                    4.0 // a real hole: the wall seen through the body
                 } else {
                     2.5
                 }
@@ -359,9 +361,10 @@ mod tests {
         let d = DepthView::new(&depth, h, w, "depth").unwrap();
         let b = DepthView::new(&bg, h, w, "background").unwrap();
         let m = foreground_mask(&d, Some(&b), &ForegroundConfig::default()).unwrap();
-        assert_eq!(m.iter().filter(|&&x| x).count(), 40 * 20 - 1);
-        assert!(!m[30 * w + 40]);
-        assert!(!m[2 * w + 2]);
+        assert_eq!(m.iter().filter(|&&x| x).count(), 40 * 20 - 4 * 3);
+        assert!(m[30 * w + 40], "dropout filled");
+        assert!(!m[21 * w + 36], "hole kept");
+        assert!(!m[2 * w + 2], "speckle dropped");
     }
 
     #[test]
