@@ -9,6 +9,7 @@ pub mod camera;
 pub mod cloud;
 pub mod error;
 pub mod io;
+pub mod stereo;
 
 #[cfg(feature = "python")]
 mod python;

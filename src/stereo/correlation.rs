@@ -1,0 +1,295 @@
+//! Window correlation between a left and a right image, computed cheaply.
+//!
+//! Both images are normalised once (global mean 0, global standard deviation 1). The
+//! window mean and variance of every pixel come from integral images (Σ I, Σ I²), so a
+//! candidate match (x, y, d) costs only the cross term Σ L·R over the window.
+
+use rayon::prelude::*;
+
+/// Correlation reported for a candidate that cannot be scored (untextured window or
+/// window outside an image). Lower than any real correlation.
+pub const NO_CORRELATION: f32 = -2.0;
+
+/// The similarity of two windows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Similarity {
+    /// Moravec's normalised cross-correlation, 2·cov / (var_L + var_R), the measure of
+    /// Čech and Šára: it also penalises a difference in contrast between the windows.
+    Mncc,
+    /// Plain normalised cross-correlation, cov / sqrt(var_L · var_R).
+    Ncc,
+}
+
+/// Window moments of one image: mean and variance per pixel (variance 0 where the
+/// window leaves the image or has too little texture to be matched).
+struct Moments {
+    mean: Vec<f32>,
+    var: Vec<f32>,
+}
+
+/// Moment images and normalised pixels of a rectified pair; scores candidates.
+pub struct Correlator {
+    left: Vec<f32>,
+    right: Vec<f32>,
+    ml: Moments,
+    mr: Moments,
+    width: usize,
+    height: usize,
+    half: usize,
+    inv_n: f32,
+    similarity: Similarity,
+}
+
+/// `img` shifted and scaled to mean 0 and standard deviation 1; `None` when the image
+/// is uniform (no texture anywhere).
+fn normalised(img: &[f32]) -> Option<Vec<f32>> {
+    let n = img.len() as f64;
+    let mean = img.iter().map(|&v| v as f64).sum::<f64>() / n;
+    let var = img.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n;
+    if var.is_nan() || var <= 0.0 {
+        return None;
+    }
+    let inv_sd = 1.0 / var.sqrt();
+    Some(
+        img.iter()
+            .map(|&v| ((v as f64 - mean) * inv_sd) as f32)
+            .collect(),
+    )
+}
+
+/// Window means and variances from integral images of I and I² (f64, so the box sums
+/// do not lose precision on large images).
+fn moments(img: &[f32], width: usize, height: usize, half: usize, min_var: f32) -> Moments {
+    let stride = width + 1;
+    let mut s1 = vec![0.0f64; stride * (height + 1)];
+    let mut s2 = vec![0.0f64; stride * (height + 1)];
+    for y in 0..height {
+        let (mut r1, mut r2) = (0.0f64, 0.0f64);
+        for x in 0..width {
+            let v = img[y * width + x] as f64;
+            r1 += v;
+            r2 += v * v;
+            s1[(y + 1) * stride + x + 1] = s1[y * stride + x + 1] + r1;
+            s2[(y + 1) * stride + x + 1] = s2[y * stride + x + 1] + r2;
+        }
+    }
+    let side = 2 * half + 1;
+    let inv_n = 1.0 / (side * side) as f64;
+    let mut mean = vec![0.0f32; width * height];
+    let mut var = vec![0.0f32; width * height];
+    if width < side || height < side {
+        return Moments { mean, var };
+    }
+    mean.par_chunks_mut(width)
+        .zip(var.par_chunks_mut(width))
+        .enumerate()
+        .filter(|(y, _)| *y >= half && *y + half < height)
+        .for_each(|(y, (mrow, vrow))| {
+            let (top, bottom) = ((y - half) * stride, (y + half + 1) * stride);
+            for x in half..width - half {
+                let (l, r) = (x - half, x + half + 1);
+                let box_sum = |s: &[f64]| s[bottom + r] - s[bottom + l] - s[top + r] + s[top + l];
+                let m = box_sum(&s1) * inv_n;
+                let v = (box_sum(&s2) * inv_n - m * m).max(0.0);
+                mrow[x] = m as f32;
+                // Untextured windows get variance 0: they are never matched.
+                vrow[x] = if v as f32 >= min_var { v as f32 } else { 0.0 };
+            }
+        });
+    Moments { mean, var }
+}
+
+impl Correlator {
+    /// Prepares a pair of `height`×`width` images for windows of `2·half + 1` pixels.
+    /// Windows whose standard deviation is below `min_texture` (in units of the image's
+    /// global standard deviation) are never matched. `None` when either image is
+    /// uniform.
+    pub fn new(
+        left: &[f32],
+        right: &[f32],
+        width: usize,
+        height: usize,
+        half: usize,
+        min_texture: f32,
+        similarity: Similarity,
+    ) -> Option<Self> {
+        let (left, right) = rayon::join(|| normalised(left), || normalised(right));
+        let (left, right) = (left?, right?);
+        let min_var = (min_texture * min_texture).max(f32::MIN_POSITIVE);
+        let (ml, mr) = rayon::join(
+            || moments(&left, width, height, half, min_var),
+            || moments(&right, width, height, half, min_var),
+        );
+        let side = 2 * half + 1;
+        Some(Correlator {
+            left,
+            right,
+            ml,
+            mr,
+            width,
+            height,
+            half,
+            inv_n: 1.0 / (side * side) as f32,
+            similarity,
+        })
+    }
+
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    pub fn half(&self) -> usize {
+        self.half
+    }
+
+    /// Whether the left window at (x, y) has texture (and lies inside the image).
+    #[inline]
+    pub fn left_textured(&self, x: usize, y: usize) -> bool {
+        self.ml.var[y * self.width + x] > 0.0
+    }
+
+    /// Correlation of the left window at (x, y) with the right window at (x − d, y).
+    /// The caller guarantees x − d ≥ half and x < width − half, half ≤ y < height − half
+    /// (outside that, one of the variances is 0 and `NO_CORRELATION` is returned only
+    /// if the indices are valid; callers check the range first).
+    #[inline]
+    pub fn score(&self, x: usize, y: usize, d: usize) -> f32 {
+        let il = y * self.width + x;
+        let ir = il - d;
+        let (vl, vr) = (self.ml.var[il], self.mr.var[ir]);
+        if vl == 0.0 || vr == 0.0 {
+            return NO_CORRELATION;
+        }
+        let cov = self.cross(x, y, d) * self.inv_n - self.ml.mean[il] * self.mr.mean[ir];
+        match self.similarity {
+            Similarity::Mncc => 2.0 * cov / (vl + vr),
+            Similarity::Ncc => cov / (vl * vr).sqrt(),
+        }
+    }
+
+    /// Σ L·R over the window pair (the only per-candidate work).
+    #[inline]
+    fn cross(&self, x: usize, y: usize, d: usize) -> f32 {
+        let (w, h) = (self.width, self.half);
+        let side = 2 * h + 1;
+        let mut sum = 0.0f32;
+        for row in y - h..=y + h {
+            let start = row * w + x - h;
+            let l = &self.left[start..start + side];
+            let r = &self.right[start - d..start - d + side];
+            sum += l.iter().zip(r).map(|(a, b)| a * b).sum::<f32>();
+        }
+        sum
+    }
+
+    /// The disparities d with a scorable window pair at left column x:
+    /// right column x − d must keep its window inside the image.
+    #[inline]
+    pub fn max_disparity_at(&self, x: usize) -> usize {
+        x.saturating_sub(self.half)
+    }
+
+    /// Whether (x, y) has its window fully inside the image.
+    #[inline]
+    pub fn inside(&self, x: usize, y: usize) -> bool {
+        x >= self.half
+            && y >= self.half
+            && x + self.half < self.width
+            && y + self.half < self.height
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn noise(n: usize, seed: u64) -> Vec<f32> {
+        let mut s = seed;
+        (0..n)
+            .map(|_| {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (s >> 40) as f32 / (1u64 << 24) as f32
+            })
+            .collect()
+    }
+
+    /// Brute-force correlation straight from the definition.
+    #[allow(clippy::too_many_arguments)]
+    fn brute(
+        l: &[f32],
+        r: &[f32],
+        w: usize,
+        half: usize,
+        x: usize,
+        y: usize,
+        d: usize,
+        sim: Similarity,
+    ) -> f64 {
+        let nl = normalised(l).unwrap();
+        let nr = normalised(r).unwrap();
+        let mut a = Vec::new();
+        let mut b = Vec::new();
+        for yy in y - half..=y + half {
+            for xx in x - half..=x + half {
+                a.push(nl[yy * w + xx] as f64);
+                b.push(nr[yy * w + xx - d] as f64);
+            }
+        }
+        let n = a.len() as f64;
+        let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+        let va = a.iter().map(|v| (v - ma).powi(2)).sum::<f64>() / n;
+        let vb = b.iter().map(|v| (v - mb).powi(2)).sum::<f64>() / n;
+        let cov = a
+            .iter()
+            .zip(&b)
+            .map(|(p, q)| (p - ma) * (q - mb))
+            .sum::<f64>()
+            / n;
+        match sim {
+            Similarity::Mncc => 2.0 * cov / (va + vb),
+            Similarity::Ncc => cov / (va * vb).sqrt(),
+        }
+    }
+
+    #[test]
+    fn score_matches_the_definition() {
+        let (w, h) = (23, 17);
+        let l = noise(w * h, 1);
+        let r = noise(w * h, 2);
+        for sim in [Similarity::Mncc, Similarity::Ncc] {
+            for half in [1, 2, 3] {
+                let c = Correlator::new(&l, &r, w, h, half, 1e-3, sim).unwrap();
+                for (x, y, d) in [(10, 8, 0), (15, 5, 7), (19, 13, 3), (half + 4, half, 4)] {
+                    let got = c.score(x, y, d) as f64;
+                    let want = brute(&l, &r, w, half, x, y, d, sim);
+                    assert!(
+                        (got - want).abs() < 1e-4,
+                        "{sim:?} h={half} ({x},{y},{d}): {got} vs {want}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn identical_windows_correlate_perfectly_and_flat_ones_not_at_all() {
+        let (w, h) = (20, 10);
+        let mut l = noise(w * h, 3);
+        for x in 0..8 {
+            for y in 0..h {
+                l[y * w + x] = 0.5; // flat block on the left
+            }
+        }
+        let c = Correlator::new(&l, &l, w, h, 2, 1e-3, Similarity::Mncc).unwrap();
+        assert!((c.score(12, 5, 0) - 1.0).abs() < 1e-5);
+        assert!(!c.left_textured(3, 5));
+        assert_eq!(c.score(3, 5, 0), NO_CORRELATION);
+        assert!(Correlator::new(&vec![1.0; w * h], &l, w, h, 2, 1e-3, Similarity::Mncc).is_none());
+    }
+}

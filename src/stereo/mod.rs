@@ -1,0 +1,441 @@
+//! Stereo matching by Growing Correspondence Seeds (Čech and Šára, "Efficient sampling
+//! of disparity space for fast and accurate matching", CVPR BenCOS workshop 2007), and
+//! disparity → depth.
+//!
+//! Convention: the images are rectified; left pixel (x, y) matches right pixel
+//! (x − d, y) with d ≥ 0. Unmatched pixels get NaN.
+//!
+//! Stages: (1) window moments of both images from integral images, (2) random seeds
+//! matched by exhaustive search along the epipolar line (plus user seeds), (3) growing
+//! from the seeds with a priority queue and the uniqueness constraint, testing only
+//! d − 1, d, d + 1 for each 4-neighbour, (4) optional left–right check, (5) subpixel
+//! refinement by a parabola through the correlations at d − 1, d, d + 1, (6) optional
+//! removal of small disparity segments. Memory is O(W·H), never O(W·H·D).
+
+mod correlation;
+mod grow;
+
+pub use correlation::Similarity;
+
+use crate::error::{ensure, Error, Result};
+use correlation::Correlator;
+use grow::{random_seeds, Grower, SplitMix64, UNMATCHED};
+use rayon::prelude::*;
+
+/// Largest accepted window side (pixels): beyond it the matcher is needlessly slow.
+pub const MAX_WINDOW: usize = 31;
+
+/// Largest disparity difference (px) between a left match and the right match it
+/// points to for the left–right check to keep it.
+pub const LR_TOLERANCE: f32 = 1.0;
+
+/// Largest disparity step (px) between 4-neighbours of one segment in the small-segment
+/// filter.
+pub const SEGMENT_STEP: i32 = 1;
+
+/// Settings of [`match_stereo`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct StereoConfig {
+    /// Side of the square correlation window in pixels (odd, ≥ 3).
+    pub window: usize,
+    /// Acceptance threshold τ on the correlation: weaker matches are never accepted.
+    pub threshold: f32,
+    /// Number of random seed pixels matched by exhaustive search.
+    pub num_seeds: usize,
+    /// Largest disparity considered; `None` for the whole epipolar line.
+    pub max_disparity: Option<usize>,
+    /// Seed distinctness ρ in (0, 1]: a seed is kept only if the best match outside
+    /// d ± 1 leaves at least 1/ρ times its dissimilarity (1 − c). 1 disables the test.
+    pub seed_distinctness: f32,
+    /// Smallest window standard deviation, in units of the image's global standard
+    /// deviation, that is matched at all (untextured windows stay unmatched).
+    pub min_texture: f32,
+    /// The window similarity.
+    pub similarity: Similarity,
+    /// Keep only matches confirmed by matching the right image against the left.
+    /// Uniqueness already makes matches one-to-one, so this costs twice the time for
+    /// a modest gain.
+    pub lr_check: bool,
+    /// Subpixel refinement by a parabola through the correlations at d − 1, d, d + 1.
+    pub subpixel: bool,
+    /// Matched segments (4-connected, disparity steps ≤ 1) smaller than this many
+    /// pixels are removed; 0 keeps everything.
+    pub min_segment: usize,
+    /// Seed of the random generator that draws seed pixels (runs are deterministic).
+    pub rng_seed: u64,
+}
+
+impl Default for StereoConfig {
+    fn default() -> Self {
+        StereoConfig {
+            window: 5,
+            threshold: 0.6,
+            num_seeds: 2000,
+            max_disparity: None,
+            seed_distinctness: 0.8,
+            min_texture: 0.01,
+            similarity: Similarity::Mncc,
+            lr_check: false,
+            subpixel: true,
+            min_segment: 0,
+            rng_seed: 0,
+        }
+    }
+}
+
+impl StereoConfig {
+    /// Checks every field; errors name it.
+    pub fn validate(&self) -> Result<()> {
+        ensure(
+            self.window >= 3 && self.window % 2 == 1 && self.window <= MAX_WINDOW,
+            "window",
+            || format!("must be odd and in 3..={MAX_WINDOW}, got {}", self.window),
+        )?;
+        ensure(
+            self.threshold.is_finite() && self.threshold > -1.0 && self.threshold <= 1.0,
+            "threshold",
+            || format!("must be a correlation in (-1, 1], got {}", self.threshold),
+        )?;
+        ensure(
+            self.seed_distinctness.is_finite()
+                && self.seed_distinctness > 0.0
+                && self.seed_distinctness <= 1.0,
+            "seed_distinctness",
+            || format!("must be in (0, 1], got {}", self.seed_distinctness),
+        )?;
+        ensure(
+            self.min_texture.is_finite() && self.min_texture >= 0.0,
+            "min_texture",
+            || format!("must be finite and ≥ 0, got {}", self.min_texture),
+        )?;
+        Ok(())
+    }
+}
+
+/// A user-given seed: left pixel (x, y) matches right pixel (x − d, y).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Seed {
+    pub x: usize,
+    pub y: usize,
+    pub d: usize,
+}
+
+/// The output of [`match_stereo`], row-major H×W.
+#[derive(Debug, Clone)]
+pub struct StereoResult {
+    /// Disparity in pixels (left x matches right x − d), NaN where unmatched.
+    pub disparity: Vec<f32>,
+    /// Correlation of the accepted match, NaN where unmatched.
+    pub confidence: Vec<f32>,
+    pub height: usize,
+    pub width: usize,
+    /// Seeds that started the growing (random seeds that passed, plus user seeds).
+    pub seeds_used: usize,
+}
+
+impl StereoResult {
+    fn empty(height: usize, width: usize) -> Self {
+        StereoResult {
+            disparity: vec![f32::NAN; height * width],
+            confidence: vec![f32::NAN; height * width],
+            height,
+            width,
+            seeds_used: 0,
+        }
+    }
+
+    /// Number of matched pixels.
+    pub fn matched(&self) -> usize {
+        self.disparity.iter().filter(|d| !d.is_nan()).count()
+    }
+}
+
+fn check_image(img: &[f32], height: usize, width: usize, name: &str) -> Result<()> {
+    ensure(img.len() == height * width, name, || {
+        format!(
+            "has {} pixels, expected {height}×{width} = {}",
+            img.len(),
+            height * width
+        )
+    })?;
+    if let Some(i) = img.iter().position(|v| !v.is_finite()) {
+        return Err(Error::invalid(
+            name,
+            format!("holds a non-finite value ({}) at pixel {i}", img[i]),
+        ));
+    }
+    Ok(())
+}
+
+/// Gray from interleaved RGB (H·W·3), by the Rec. 601 luma weights.
+pub fn gray_from_rgb(rgb: &[f32]) -> Vec<f32> {
+    rgb.chunks_exact(3)
+        .map(|p| 0.299 * p[0] + 0.587 * p[1] + 0.114 * p[2])
+        .collect()
+}
+
+/// Matches a rectified gray pair (row-major `height`×`width`, any intensity scale) by
+/// Growing Correspondence Seeds from `config.num_seeds` random seeds.
+pub fn match_stereo(
+    left: &[f32],
+    right: &[f32],
+    height: usize,
+    width: usize,
+    config: &StereoConfig,
+) -> Result<StereoResult> {
+    match_stereo_seeded(left, right, height, width, config, &[])
+}
+
+/// Like [`match_stereo`], growing also from the user's `seeds` (each must lie inside
+/// the image with x − d ≥ 0; seeds whose correlation is below the threshold are
+/// dropped like any other candidate).
+pub fn match_stereo_seeded(
+    left: &[f32],
+    right: &[f32],
+    height: usize,
+    width: usize,
+    config: &StereoConfig,
+    seeds: &[Seed],
+) -> Result<StereoResult> {
+    config.validate()?;
+    ensure(height > 0 && width > 0, "left", || {
+        format!("image is empty ({height}×{width})")
+    })?;
+    check_image(left, height, width, "left")?;
+    check_image(right, height, width, "right")?;
+    let max_d = config.max_disparity.unwrap_or(width - 1);
+    ensure(max_d < width, "max_disparity", || {
+        format!("must be below the image width {width}, got {max_d}")
+    })?;
+    for (i, s) in seeds.iter().enumerate() {
+        ensure(s.x < width && s.y < height && s.d <= s.x, "seeds", || {
+            format!(
+                "seed {i} ({}, {}, d={}) is outside the {height}×{width} image or points left of it",
+                s.x, s.y, s.d
+            )
+        })?;
+    }
+    ensure(
+        config.num_seeds > 0 || !seeds.is_empty(),
+        "num_seeds",
+        || "is 0 and no seeds were given: nothing to grow from".to_string(),
+    )?;
+    let half = config.window / 2;
+    if height < config.window || width < config.window {
+        return Ok(StereoResult::empty(height, width));
+    }
+
+    let Some(corr) = Correlator::new(
+        left,
+        right,
+        width,
+        height,
+        half,
+        config.min_texture,
+        config.similarity,
+    ) else {
+        return Ok(StereoResult::empty(height, width)); // a uniform image: no texture
+    };
+    let user: Vec<(usize, usize, usize)> = seeds.iter().map(|s| (s.x, s.y, s.d)).collect();
+    let (mut disp_int, confidence, seeds_used) = grow_pass(&corr, config, max_d, &user);
+
+    if config.lr_check {
+        let flip = |img: &[f32]| -> Vec<f32> {
+            img.chunks_exact(width)
+                .flat_map(|row| row.iter().rev().copied())
+                .collect()
+        };
+        // The right image, mirrored, is a left image for the mirrored left image.
+        let back = Correlator::new(
+            &flip(right),
+            &flip(left),
+            width,
+            height,
+            half,
+            config.min_texture,
+            config.similarity,
+        )
+        .expect("both images have texture: the forward pass built its correlator");
+        let (disp_back, _, _) = grow_pass(&back, config, max_d, &[]);
+        left_right_check(&mut disp_int, &disp_back, width);
+    }
+    if config.min_segment > 0 {
+        remove_small_segments(&mut disp_int, width, height, config.min_segment);
+    }
+
+    let mut disparity = vec![f32::NAN; width * height];
+    let mut conf = confidence;
+    disparity
+        .par_chunks_mut(width)
+        .zip(conf.par_chunks_mut(width))
+        .zip(disp_int.par_chunks(width))
+        .enumerate()
+        .for_each(|(y, ((drow, crow), irow))| {
+            for (x, ((dv, cv), &d)) in drow.iter_mut().zip(crow).zip(irow).enumerate() {
+                if d == UNMATCHED {
+                    *cv = f32::NAN;
+                    continue;
+                }
+                let d = d as usize;
+                let offset = if config.subpixel {
+                    subpixel_offset(&corr, x, y, d, max_d)
+                } else {
+                    0.0
+                };
+                *dv = d as f32 + offset;
+            }
+        });
+    Ok(StereoResult {
+        disparity,
+        confidence: conf,
+        height,
+        width,
+        seeds_used,
+    })
+}
+
+/// Seeds + growing on one correlator: integer disparities, confidences, seeds used.
+fn grow_pass(
+    corr: &Correlator,
+    config: &StereoConfig,
+    max_d: usize,
+    user: &[(usize, usize, usize)],
+) -> (Vec<i32>, Vec<f32>, usize) {
+    let mut rng = SplitMix64::new(config.rng_seed);
+    let found = random_seeds(
+        corr,
+        config.num_seeds,
+        max_d,
+        config.threshold,
+        config.seed_distinctness,
+        &mut rng,
+    );
+    let mut all: Vec<(usize, usize, usize)> = user.to_vec();
+    all.extend(found.iter().map(|&(x, y, d, _)| (x, y, d)));
+    let n = corr.width() * corr.height();
+    let mut disparity = vec![UNMATCHED; n];
+    let mut confidence = vec![f32::NAN; n];
+    Grower::new().grow(
+        corr,
+        &all,
+        max_d,
+        config.threshold,
+        &mut disparity,
+        &mut confidence,
+    );
+    (disparity, confidence, all.len())
+}
+
+/// Unmatches left pixels whose match is not confirmed by the mirrored (right-to-left)
+/// pass `back`, stored in mirrored right coordinates.
+fn left_right_check(disp: &mut [i32], back: &[i32], width: usize) {
+    disp.par_chunks_mut(width)
+        .zip(back.par_chunks(width))
+        .for_each(|(row, brow)| {
+            for (x, d) in row.iter_mut().enumerate() {
+                if *d == UNMATCHED {
+                    continue;
+                }
+                let db = brow[width - 1 - (x - *d as usize)];
+                if db == UNMATCHED || ((db - *d).abs() as f32) > LR_TOLERANCE {
+                    *d = UNMATCHED;
+                }
+            }
+        });
+}
+
+/// Unmatches 4-connected segments (neighbour disparities within `SEGMENT_STEP`) of
+/// fewer than `min_size` pixels.
+fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size: usize) {
+    let n = width * height;
+    let mut label = vec![u32::MAX; n];
+    let mut stack = Vec::new();
+    let mut members = Vec::new();
+    for start in 0..n {
+        if disp[start] == UNMATCHED || label[start] != u32::MAX {
+            continue;
+        }
+        label[start] = start as u32;
+        stack.push(start);
+        members.clear();
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            let (x, y) = (i % width, i / width);
+            let mut visit = |j: usize| {
+                if disp[j] != UNMATCHED
+                    && label[j] == u32::MAX
+                    && (disp[j] - disp[i]).abs() <= SEGMENT_STEP
+                {
+                    label[j] = start as u32;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < width {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - width);
+            }
+            if y + 1 < height {
+                visit(i + width);
+            }
+        }
+        if members.len() < min_size {
+            for &i in &members {
+                disp[i] = UNMATCHED;
+            }
+        }
+    }
+}
+
+/// Vertex offset in (−0.5, 0.5) of the parabola through the correlations at d − 1, d,
+/// d + 1; 0 at the ends of the range or where the three do not peak at d.
+fn subpixel_offset(corr: &Correlator, x: usize, y: usize, d: usize, max_d: usize) -> f32 {
+    let top = max_d.min(corr.max_disparity_at(x));
+    if d == 0 || d + 1 > top {
+        return 0.0;
+    }
+    let (cm, c0, cp) = (
+        corr.score(x, y, d - 1),
+        corr.score(x, y, d),
+        corr.score(x, y, d + 1),
+    );
+    let curvature = cm - 2.0 * c0 + cp;
+    if curvature.is_nan() || curvature >= 0.0 {
+        return 0.0;
+    }
+    (0.5 * (cm - cp) / curvature).clamp(-0.5, 0.5)
+}
+
+/// Depth in metres from disparity in pixels: Z = baseline · focal / (d + doffs); 0
+/// where the disparity is NaN or d + doffs ≤ 0.
+pub fn depth_from_disparity(
+    disparity: &[f32],
+    focal: f64,
+    baseline: f64,
+    doffs: f64,
+) -> Result<Vec<f32>> {
+    crate::error::ensure_positive(focal, "focal")?;
+    crate::error::ensure_positive(baseline, "baseline")?;
+    ensure(doffs.is_finite(), "doffs", || {
+        format!("must be finite, got {doffs}")
+    })?;
+    let bf = baseline * focal;
+    Ok(disparity
+        .iter()
+        .map(|&d| {
+            let denom = d as f64 + doffs;
+            if d.is_finite() && denom > 0.0 {
+                (bf / denom) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect())
+}
+
+#[cfg(test)]
+mod tests;
