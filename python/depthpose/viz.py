@@ -13,7 +13,16 @@ from ._core import InvalidInputError
 
 PathLike = Union[str, "os.PathLike[str]"]
 
-__all__ = ["colorize_depth", "overlay_mask", "overlay_labels", "save_png", "montage", "PART_COLORS"]
+__all__ = [
+    "BONES",
+    "PART_COLORS",
+    "colorize_depth",
+    "draw_skeleton",
+    "montage",
+    "overlay_labels",
+    "overlay_mask",
+    "save_png",
+]
 
 #: Distinct colours for up to 16 labels (body parts), RGB uint8.
 PART_COLORS = np.array(
@@ -93,3 +102,46 @@ def montage(images: list[np.ndarray], columns: int = 4, pad: int = 2) -> np.ndar
 def save_png(path: PathLike, rgb: np.ndarray) -> None:
     """Writes an (H, W, 3) uint8 image as PNG."""
     _core.write_rgb_png(os.fspath(path), np.ascontiguousarray(rgb, dtype=np.uint8))
+
+
+#: Bones of the 15-joint skeleton (ITOP order), as joint index pairs.
+BONES = [
+    (0, 1), (1, 2), (1, 3), (2, 4), (4, 6), (3, 5), (5, 7), (1, 8), (8, 9), (8, 10),
+    (9, 11), (11, 13), (10, 12), (12, 14),
+]  # fmt: skip
+
+#: Colours: the subject's right side red, left side blue, centre yellow.
+SIDE_COLORS = {"R": (230, 40, 40), "L": (40, 90, 240), "C": (240, 210, 40)}
+_JOINT_SIDE = "CCRLRLRLCRLRLRL"
+
+
+def _line(rgb: np.ndarray, a, b, color, width: int = 1) -> None:
+    h, w = rgb.shape[:2]
+    n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) + 1
+    if not np.isfinite([*a, *b]).all() or n > 4 * (h + w):
+        return
+    us = np.linspace(a[0], b[0], n)
+    vs = np.linspace(a[1], b[1], n)
+    for du in range(-(width // 2), width // 2 + 1):
+        for dv in range(-(width // 2), width // 2 + 1):
+            u = np.round(us).astype(int) + du
+            v = np.round(vs).astype(int) + dv
+            ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
+            rgb[v[ok], u[ok]] = color
+
+
+def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -> np.ndarray:
+    """Draws the 15-joint skeleton (camera frame, metres) projected into the picture."""
+    out = rgb.copy()
+    joints = np.asarray(joints, np.float64)
+    if not np.isfinite(joints).any():
+        return out
+    uv = camera.project(np.nan_to_num(joints, nan=0.0))
+    uv[~np.isfinite(joints).all(1)] = np.nan
+    for a, b in BONES:
+        side = _JOINT_SIDE[b] if _JOINT_SIDE[b] != "C" else _JOINT_SIDE[a]
+        _line(out, uv[a], uv[b], SIDE_COLORS[side], width)
+    for j in range(len(uv)):
+        if np.isfinite(uv[j]).all():
+            _line(out, uv[j] - 1.5, uv[j] + 1.5, (255, 255, 255), width + 1)
+    return out
