@@ -36,6 +36,96 @@ def _cmd_foreground(args: argparse.Namespace) -> int:
     return 1 if failures else 0
 
 
+def _cmd_estimate(args: argparse.Namespace) -> int:
+    """Poses of every frame of a sequence, a folder of frames or one image."""
+    import json
+
+    from .pipeline import JOINT_NAMES, estimate_frames
+    from .sequence import open_sequence
+
+    seq = open_sequence(args.input, intrinsics=args.intrinsics, depth_scale=args.depth_scale)
+    viz_dir = Path(args.viz) if args.viz else None
+    if viz_dir:
+        viz_dir.mkdir(parents=True, exist_ok=True)
+    jsonl = open(args.jsonl, "w") if args.jsonl else None  # noqa: SIM115
+    t0 = time.perf_counter()
+
+    def on_frame(k: int, res) -> None:
+        if jsonl:
+            jsonl.write(json.dumps({"frame": k, **res.to_dict()}) + "\n")
+        if viz_dir:
+            from . import viz
+
+            pic = viz.overlay_labels(viz.colorize_depth(depth_cache[k]), res.labels)
+            pic = viz.draw_skeleton(pic, res.joints, seq.camera)
+            viz.save_png(viz_dir / f"frame_{k:05d}.png", pic)
+        sys.stderr.write(f"\rframe {k + 1}/{seq.n_frames}")
+
+    frames = seq.frames()
+    depth_cache = frames
+    res = estimate_frames(
+        frames, seq.camera, background=seq.background, track=args.track, on_frame=on_frame
+    )
+    sys.stderr.write("\n")
+    if jsonl:
+        for e in res.errors:
+            jsonl.write(
+                json.dumps({"frame": e["frame"], "joints": None, "error": e["error"]}) + "\n"
+            )
+        jsonl.close()
+    for e in res.errors:
+        print(f"frame {e['frame']}: {e['error']}", file=sys.stderr)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(
+        out, joints=res.joints, pose=res.pose, confidence=res.confidence,
+        joint_names=np.array(JOINT_NAMES),
+    )  # fmt: skip
+    n = seq.n_frames
+    dt = time.perf_counter() - t0
+    print(f"{n - len(res.errors)}/{n} frames estimated in {dt:.1f} s ({n / dt:.1f} frames/s)")
+    if seq.gt_joints is not None and seq.gt_joints.shape == res.joints.shape:
+        from .metrics import evaluate
+
+        acc = evaluate(res.joints, seq.gt_joints)
+        print(f"against the sequence's joints: MPJPE {acc['mpjpe_mm']:.1f} mm, "
+              f"PCK@10cm {100 * acc['pck']:.1f} %")  # fmt: skip
+    return 0 if not res.errors else 1
+
+
+def _cmd_batch(args: argparse.Namespace) -> int:
+    from .batch import run
+
+    summary = run(
+        args.inputs, args.out, scheduler=args.scheduler, n_workers=args.workers,
+        chunk_frames=args.chunk_frames, overlap=args.overlap, track=args.track,
+        intrinsics=args.intrinsics, depth_scale=args.depth_scale, templates=args.templates,
+    )  # fmt: skip
+    print(summary.report())
+    return 0 if summary.failed_frames == 0 and not summary.failed_sequences else 1
+
+
+def _cmd_stereo(args: argparse.Namespace) -> int:
+    from .stereo import cli_stereo
+
+    return cli_stereo(args.stereo_args)
+
+
+def _cmd_templates(args: argparse.Namespace) -> int:
+    from .templates import TemplateDatabase
+
+    if args.action == "build":
+        db = TemplateDatabase.build(progress=True)
+        path = Path(args.out) if args.out else TemplateDatabase.default_path()
+        db.save(path)
+        print(f"{len(db)} templates written to {path}")
+    else:
+        path = Path(args.out) if args.out else TemplateDatabase.default_path()
+        db = TemplateDatabase.load(path)
+        print(f"{path}: {len(db)} templates")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="depthpose", description="3-D human pose from depth images and stereo pairs."
@@ -47,6 +137,42 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="depthpose-demo", help="folder for results and pictures")
     demo.add_argument("--frames", type=int, default=30, help="number of frames")
     demo.set_defaults(func=_cmd_demo)
+
+    est = sub.add_parser("estimate", help="poses of a depth sequence or image")
+    est.add_argument(
+        "input", help=".npz sequence (shared layout), folder of depth frames, or image"
+    )
+    est.add_argument("--out", required=True, help="output .npz (joints, pose, confidence)")
+    est.add_argument("--viz", help="folder for a picture of each frame")
+    est.add_argument("--jsonl", help="also write one JSON line per frame here")
+    est.add_argument("--track", action=argparse.BooleanOptionalAction, default=True,
+                     help="track through the sequence (default) or estimate each frame")  # fmt: skip
+    est.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
+    est.add_argument("--depth-scale", type=float, default=0.001, help="metres per unit")
+    est.set_defaults(func=_cmd_estimate)
+
+    bat = sub.add_parser("batch", help="many sequences on a Dask cluster, resumable")
+    bat.add_argument("inputs", nargs="+", help="sequences (.npz), frame folders or globs")
+    bat.add_argument("--out", required=True, help="output folder")
+    bat.add_argument("--scheduler", help="address of a Dask scheduler (tcp://host:port)")
+    bat.add_argument("--workers", type=int, help="local workers (default: one per core)")
+    bat.add_argument("--chunk-frames", type=int, default=32)
+    bat.add_argument("--overlap", type=int, default=4, help="warm-up frames per chunk")
+    bat.add_argument("--track", action=argparse.BooleanOptionalAction, default=True)
+    bat.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
+    bat.add_argument("--depth-scale", type=float, default=0.001)
+    bat.add_argument("--templates", help="a saved template database to share")
+    bat.set_defaults(func=_cmd_batch)
+
+    st = sub.add_parser("stereo", help="disparity (and depth) of a rectified stereo pair",
+                        add_help=False)  # fmt: skip
+    st.add_argument("stereo_args", nargs=argparse.REMAINDER)
+    st.set_defaults(func=_cmd_stereo)
+
+    tp = sub.add_parser("templates", help="build or inspect the template database")
+    tp.add_argument("action", choices=["build", "info"])
+    tp.add_argument("--out", help="file (default: the cache used by default)")
+    tp.set_defaults(func=_cmd_templates)
 
     fg = sub.add_parser("foreground", help="foreground masks of depth images, as pictures")
     fg.add_argument("inputs", nargs="+", help="depth images (.png, .npy, .pfm, .u16)")
