@@ -145,8 +145,12 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--out", required=True, help="output .npz (joints, pose, confidence)")
     est.add_argument("--viz", help="folder for a picture of each frame")
     est.add_argument("--jsonl", help="also write one JSON line per frame here")
-    est.add_argument("--track", action=argparse.BooleanOptionalAction, default=True,
-                     help="track through the sequence (default) or estimate each frame")  # fmt: skip
+    est.add_argument(
+        "--track",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="track through the sequence (default) or estimate each frame",
+    )
     est.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
     est.add_argument("--depth-scale", type=float, default=0.001, help="metres per unit")
     est.set_defaults(func=_cmd_estimate)
