@@ -21,6 +21,8 @@ __all__ = [
     "montage",
     "overlay_labels",
     "overlay_mask",
+    "plot_body_3d",
+    "save_gif",
     "save_png",
 ]
 
@@ -145,3 +147,42 @@ def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -
         if np.isfinite(uv[j]).all():
             _line(out, uv[j] - 1.5, uv[j] + 1.5, (255, 255, 255), width + 1)
     return out
+
+
+def plot_body_3d(model, pose: np.ndarray, ax=None, *, joints: np.ndarray | None = None):
+    """A 3-D view of the fitted ellipsoid body and skeleton (matplotlib, ``viz`` extra).
+    Returns the axes. Camera frame shown with y (down) flipped so the body stands up."""
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        ax = plt.figure(figsize=(5, 6)).add_subplot(projection="3d")
+    flip = np.array([1.0, -1.0, 1.0])
+    for k, (v, f) in enumerate(model.superquadric_meshes(pose, 10, 12)):
+        v = v * flip
+        ax.plot_trisurf(v[:, 0], v[:, 2], v[:, 1], triangles=f, color=PART_COLORS[k] / 255,
+                        alpha=0.35, linewidth=0)  # fmt: skip
+    j = (model.joints(pose) if joints is None else np.asarray(joints)) * flip
+    for a, b in BONES:
+        ax.plot(*zip(j[a][[0, 2, 1]], j[b][[0, 2, 1]]), color="k", linewidth=2)
+    ax.scatter(j[:, 0], j[:, 2], j[:, 1], color="k", s=10)
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.set_zlabel("height (m)")
+    centre = j.mean(0)
+    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre[[0, 2, 1]]):
+        setter(c - 1.0, c + 1.0)
+    return ax
+
+
+def save_gif(path: PathLike, pictures: list[np.ndarray], fps: float = 10.0) -> None:
+    """An animated GIF of (H, W, 3) uint8 pictures (Pillow, which matplotlib brings)."""
+    from PIL import Image
+
+    if not pictures:
+        raise InvalidInputError("pictures: need at least one picture")
+    frames = [Image.fromarray(np.ascontiguousarray(p, dtype=np.uint8)) for p in pictures]
+    frames[0].save(os.fspath(path), save_all=True, append_images=frames[1:],
+                   duration=int(1000 / fps), loop=0)  # fmt: skip
