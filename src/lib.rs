@@ -5,6 +5,7 @@
 //! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
 //! [`python`] behind the `python` feature; algorithms never live there.
 
+pub mod body;
 pub mod camera;
 pub mod cloud;
 pub mod error;
