@@ -1,7 +1,9 @@
 //! Points + normals + neighbour graph of a 640×480 frame (the first stage of every frame).
 
 use criterion::{criterion_group, criterion_main, Criterion};
-use depthpose::cloud::{neighbour_graph, normals_from_depth, Cloud, Connectivity, DepthView, NormalConfig};
+use depthpose::cloud::{
+    neighbour_graph, normals_from_depth, Cloud, Connectivity, DepthView, NormalConfig,
+};
 use depthpose::Camera;
 use std::hint::black_box;
 

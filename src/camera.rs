@@ -26,16 +26,22 @@ impl Camera {
         ensure(width > 0 && height > 0, "width/height", || {
             format!("image size must be positive, got {width}x{height}")
         })?;
-        ensure(width <= 1 << 15 && height <= 1 << 15, "width/height", || {
-            format!("image size {width}x{height} is unreasonably large")
-        })?;
+        ensure(
+            width <= 1 << 15 && height <= 1 << 15,
+            "width/height",
+            || format!("image size {width}x{height} is unreasonably large"),
+        )?;
         let (w, h) = (width as f64, height as f64);
-        ensure(cx.is_finite() && cx > -0.5 * w && cx < 1.5 * w, "cx", || {
-            format!("principal point cx={cx} does not fit an image {width} pixels wide")
-        })?;
-        ensure(cy.is_finite() && cy > -0.5 * h && cy < 1.5 * h, "cy", || {
-            format!("principal point cy={cy} does not fit an image {height} pixels high")
-        })?;
+        ensure(
+            cx.is_finite() && cx > -0.5 * w && cx < 1.5 * w,
+            "cx",
+            || format!("principal point cx={cx} does not fit an image {width} pixels wide"),
+        )?;
+        ensure(
+            cy.is_finite() && cy > -0.5 * h && cy < 1.5 * h,
+            "cy",
+            || format!("principal point cy={cy} does not fit an image {height} pixels high"),
+        )?;
         Ok(Camera {
             fx,
             fy,

@@ -41,7 +41,10 @@ fn open(path: &Path) -> Result<DynamicImage> {
 /// An 8-bit or colour image is refused: it cannot hold depth.
 pub fn read_depth(path: &Path, scale: f64) -> Result<Image> {
     if !(scale.is_finite() && scale > 0.0) {
-        return Err(Error::invalid("scale", format!("must be positive, got {scale}")));
+        return Err(Error::invalid(
+            "scale",
+            format!("must be positive, got {scale}"),
+        ));
     }
     let img = open(path)?;
     let (width, height) = (img.width() as usize, img.height() as usize);
@@ -113,7 +116,12 @@ pub fn read_float(path: &Path) -> Result<Image> {
     let data = match img {
         DynamicImage::ImageRgb32F(b) => b.pixels().map(|p| p[0]).collect(),
         DynamicImage::ImageRgba32F(b) => b.pixels().map(|p| p[0]).collect(),
-        other => other.into_luma16().into_raw().into_iter().map(|v| v as f32).collect(),
+        other => other
+            .into_luma16()
+            .into_raw()
+            .into_iter()
+            .map(|v| v as f32)
+            .collect(),
     };
     Ok(Image {
         data,
@@ -124,14 +132,26 @@ pub fn read_float(path: &Path) -> Result<Image> {
 
 /// Writes depth (metres) as a 16-bit PNG in units of `scale` metres (0 = no reading;
 /// NaN, zero and out-of-range values are written as 0).
-pub fn write_depth_png(path: &Path, depth: &[f32], height: usize, width: usize, scale: f64) -> Result<()> {
+pub fn write_depth_png(
+    path: &Path,
+    depth: &[f32],
+    height: usize,
+    width: usize,
+    scale: f64,
+) -> Result<()> {
     if !(scale.is_finite() && scale > 0.0) {
-        return Err(Error::invalid("scale", format!("must be positive, got {scale}")));
+        return Err(Error::invalid(
+            "scale",
+            format!("must be positive, got {scale}"),
+        ));
     }
     if depth.len() != height * width || height == 0 || width == 0 {
         return Err(Error::invalid(
             "depth",
-            format!("{} values do not make a {height}x{width} image", depth.len()),
+            format!(
+                "{} values do not make a {height}x{width} image",
+                depth.len()
+            ),
         ));
     }
     let raw: Vec<u16> = depth
@@ -156,7 +176,10 @@ pub fn write_rgb_png(path: &Path, rgb: &[u8], height: usize, width: usize) -> Re
     if rgb.len() != height * width * 3 || height == 0 || width == 0 {
         return Err(Error::invalid(
             "image",
-            format!("{} bytes do not make a {height}x{width} RGB image", rgb.len()),
+            format!(
+                "{} bytes do not make a {height}x{width} RGB image",
+                rgb.len()
+            ),
         ));
     }
     image::save_buffer_with_format(
@@ -190,14 +213,20 @@ mod tests {
         // An 8-bit picture is refused as depth but reads as gray.
         let q = dir.join("g.png");
         write_rgb_png(&q, &[255u8; 18], 2, 3).unwrap();
-        assert!(read_depth(&q, 0.001).unwrap_err().to_string().contains("not a depth image"));
+        assert!(read_depth(&q, 0.001)
+            .unwrap_err()
+            .to_string()
+            .contains("not a depth image"));
         let g = read_gray(&q).unwrap();
         assert!(g.data.iter().all(|&v| (v - 1.0).abs() < 1e-5));
         // Truncated file.
         let bytes = std::fs::read(&p).unwrap();
         let t = dir.join("t.png");
         std::fs::write(&t, &bytes[..bytes.len() / 2]).unwrap();
-        assert!(read_depth(&t, 0.001).unwrap_err().to_string().contains("corrupt"));
+        assert!(read_depth(&t, 0.001)
+            .unwrap_err()
+            .to_string()
+            .contains("corrupt"));
         assert!(read_depth(&dir.join("missing.png"), 0.001)
             .unwrap_err()
             .to_string()

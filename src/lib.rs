@@ -10,6 +10,7 @@ pub mod camera;
 pub mod cloud;
 pub mod error;
 pub mod io;
+pub mod render;
 
 #[cfg(feature = "python")]
 mod python;

@@ -54,7 +54,12 @@ impl ForegroundConfig {
         ensure(
             c.min_depth.is_finite() && c.min_depth >= 0.0 && c.max_depth > c.min_depth,
             "min_depth/max_depth",
-            || format!("need 0 <= min_depth < max_depth, got {} and {}", c.min_depth, c.max_depth),
+            || {
+                format!(
+                    "need 0 <= min_depth < max_depth, got {} and {}",
+                    c.min_depth, c.max_depth
+                )
+            },
         )?;
         for (v, n) in [
             (c.bg_tolerance, "bg_tolerance"),
@@ -62,7 +67,9 @@ impl ForegroundConfig {
             (c.max_step, "max_step"),
             (c.attach_depth, "attach_depth"),
         ] {
-            ensure(v.is_finite() && v >= 0.0, n, || format!("must be >= 0, got {v}"))?;
+            ensure(v.is_finite() && v >= 0.0, n, || {
+                format!("must be >= 0, got {v}")
+            })?;
         }
         ensure(
             c.large_share > 0.0 && c.large_share <= 1.0,

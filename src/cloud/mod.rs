@@ -32,7 +32,10 @@ impl<'a> DepthView<'a> {
                 height * width
             )
         })?;
-        if let Some(bad) = data.par_iter().position_any(|&z| z.is_infinite() || z < 0.0) {
+        if let Some(bad) = data
+            .par_iter()
+            .position_any(|&z| z.is_infinite() || z < 0.0)
+        {
             return Err(Error::invalid(
                 name,
                 format!(
@@ -203,13 +206,7 @@ pub fn normals_into(
             return None;
         }
         let z = depth.data[(row * w + col) as usize];
-        (z > 0.0).then(|| {
-            [
-                (col as f32 - cx) * z / fx,
-                (row as f32 - cy) * z / fy,
-                z,
-            ]
-        })
+        (z > 0.0).then(|| [(col as f32 - cx) * z / fx, (row as f32 - cy) * z / fy, z])
     };
     out.par_iter_mut().enumerate().for_each(|(k, n)| {
         let p = cloud.points[k];
@@ -420,7 +417,11 @@ mod tests {
             let on = n.x * p[0] as f64 + n.y * p[1] as f64 + n.z * p[2] as f64;
             assert!((on - d).abs() < 1e-5, "point off the plane by {}", on - d);
             let dot = n.x * m[0] as f64 + n.y * m[1] as f64 + n.z * m[2] as f64;
-            assert!(dot > 0.9999, "normal off by {} deg", dot.acos().to_degrees());
+            assert!(
+                dot > 0.9999,
+                "normal off by {} deg",
+                dot.acos().to_degrees()
+            );
         }
     }
 
@@ -436,18 +437,16 @@ mod tests {
         let normals = normals_from_depth(&view, &cam, &cloud, &NormalConfig::default());
         let mut worst_inner = 0.0f64;
         for (p, m) in cloud.points.iter().zip(&normals) {
-            let radial = nalgebra::Vector3::new(
-                p[0] as f64 - c[0],
-                p[1] as f64 - c[1],
-                p[2] as f64 - c[2],
-            );
+            let radial =
+                nalgebra::Vector3::new(p[0] as f64 - c[0], p[1] as f64 - c[1], p[2] as f64 - c[2]);
             assert!((radial.norm() - rad).abs() < 1e-4);
             let radial = radial.normalize();
             let dot = radial.x * m[0] as f64 + radial.y * m[1] as f64 + radial.z * m[2] as f64;
             // Facing the camera always; accurate where the surface is not grazing.
             assert!(dot > 0.0);
-            let facing = -(radial.x * p[0] as f64 + radial.y * p[1] as f64 + radial.z * p[2] as f64)
-                / (p[0] as f64).hypot(p[1] as f64).hypot(p[2] as f64);
+            let facing =
+                -(radial.x * p[0] as f64 + radial.y * p[1] as f64 + radial.z * p[2] as f64)
+                    / (p[0] as f64).hypot(p[1] as f64).hypot(p[2] as f64);
             if facing > 0.5 {
                 worst_inner = worst_inner.max(dot.clamp(-1.0, 1.0).acos().to_degrees());
             }

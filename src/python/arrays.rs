@@ -2,8 +2,9 @@
 
 use super::InvalidInputError;
 use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{PyArrayDescrMethods, 
-    IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods,
+use numpy::{
+    IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 
@@ -41,7 +42,10 @@ fn untyped<'a, 'py>(
         }
     }
     if arr.len() == 0 {
-        return Err(err(name, format!("array is empty (shape {:?})", arr.shape())));
+        return Err(err(
+            name,
+            format!("array is empty (shape {:?})", arr.shape()),
+        ));
     }
     if !arr.is_c_contiguous() {
         return Err(err(
@@ -145,7 +149,12 @@ pub fn bool_array(obj: &Bound<PyAny>, name: &str, shape: &[usize]) -> PyResult<V
         return Ok(ro.as_slice().map_err(|e| err(name, e))?.to_vec());
     }
     Ok(to_i64(arr, name)
-        .map_err(|_| err(name, format!("expected a bool array, got dtype {}", arr.dtype())))?
+        .map_err(|_| {
+            err(
+                name,
+                format!("expected a bool array, got dtype {}", arr.dtype()),
+            )
+        })?
         .into_iter()
         .map(|v| v != 0)
         .collect())

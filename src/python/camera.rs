@@ -22,7 +22,14 @@ impl PyCamera {
             }
         };
         Ok(PyCamera {
-            inner: Camera::new(fx, fy, cx, cy, size(width, "width")?, size(height, "height")?)?,
+            inner: Camera::new(
+                fx,
+                fy,
+                cx,
+                cy,
+                size(width, "width")?,
+                size(height, "height")?,
+            )?,
         })
     }
 
@@ -130,12 +137,12 @@ impl PyCamera {
         let out: Vec<f64> = py.detach(|| {
             p.data
                 .chunks_exact(3)
-                .flat_map(|q| {
-                    match cam.project(&nalgebra::Vector3::new(q[0], q[1], q[2])) {
+                .flat_map(
+                    |q| match cam.project(&nalgebra::Vector3::new(q[0], q[1], q[2])) {
                         Some((u, v)) => [u, v],
                         None => [f64::NAN, f64::NAN],
-                    }
-                })
+                    },
+                )
                 .collect()
         });
         Ok(super::arrays::to_numpy(py, out, &[p.shape[0], 2]))

@@ -63,7 +63,9 @@ fn surface_normals<'py>(
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
     if radius == 0 || radius > 32 {
-        return Err(crate::Error::invalid("radius", format!("must be in 1..=32, got {radius}")).into());
+        return Err(
+            crate::Error::invalid("radius", format!("must be in 1..=32, got {radius}")).into(),
+        );
     }
     let normals = py.detach(|| -> PyResult<Vec<[f32; 3]>> {
         let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
@@ -75,7 +77,11 @@ fn surface_normals<'py>(
         Ok(normals_from_depth(&view, &camera.inner, &cloud, &cfg))
     })?;
     let n = normals.len();
-    Ok(to_numpy(py, normals.into_iter().flatten().collect(), &[n, 3]))
+    Ok(to_numpy(
+        py,
+        normals.into_iter().flatten().collect(),
+        &[n, 3],
+    ))
 }
 
 /// The neighbourhood graph between valid (masked) pixels: edges (E, 2) int32 of point
@@ -123,7 +129,9 @@ fn foreground_mask<'py>(
     large_share: f32,
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
     let d = depth_array(depth, "depth")?;
-    let bg = background.map(|b| depth_array(b, "background")).transpose()?;
+    let bg = background
+        .map(|b| depth_array(b, "background"))
+        .transpose()?;
     let cfg = ForegroundConfig {
         min_depth,
         max_depth,
@@ -137,7 +145,12 @@ fn foreground_mask<'py>(
     let mask = py.detach(|| -> PyResult<Vec<bool>> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         let bgv = match &bg {
-            Some(b) => Some(DepthView::new(&b.data, b.shape[0], b.shape[1], "background")?),
+            Some(b) => Some(DepthView::new(
+                &b.data,
+                b.shape[0],
+                b.shape[1],
+                "background",
+            )?),
             None => None,
         };
         Ok(fg_mask(&view, bgv.as_ref(), &cfg)?)

@@ -37,7 +37,12 @@ fn read_float_image(py: Python<'_>, path: PathBuf) -> PyResult<F32Array<'_>> {
 /// Writes depth (H, W) metres as a 16-bit PNG in units of `scale` metres.
 #[pyfunction]
 #[pyo3(signature = (path, depth, scale=0.001))]
-fn write_depth_png(py: Python<'_>, path: PathBuf, depth: &Bound<'_, PyAny>, scale: f64) -> PyResult<()> {
+fn write_depth_png(
+    py: Python<'_>,
+    path: PathBuf,
+    depth: &Bound<'_, PyAny>,
+    scale: f64,
+) -> PyResult<()> {
     let d: Arr<f32> = depth_array(depth, "depth")?;
     py.detach(|| io::write_depth_png(&path, &d.data, d.shape[0], d.shape[1], scale))?;
     Ok(())
@@ -50,7 +55,10 @@ fn write_rgb_png(py: Python<'_>, path: PathBuf, rgb: &Bound<'_, PyAny>) -> PyRes
     if a.shape[2] != 3 || a.data.iter().any(|&v| !(0..=255).contains(&v)) {
         return Err(crate::Error::invalid(
             "rgb",
-            format!("expected (H, W, 3) values in 0..=255, got shape {:?}", a.shape),
+            format!(
+                "expected (H, W, 3) values in 0..=255, got shape {:?}",
+                a.shape
+            ),
         )
         .into());
     }
