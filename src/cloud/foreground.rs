@@ -38,9 +38,9 @@ impl Default for ForegroundConfig {
         ForegroundConfig {
             min_depth: 0.3,
             max_depth: 8.0,
-            bg_tolerance: 0.04,
-            bg_tolerance_quadratic: 0.006,
-            max_step: 0.12,
+            bg_tolerance: 0.025,
+            bg_tolerance_quadratic: 0.003,
+            max_step: 0.25,
             min_component: 40,
             large_share: 0.3,
             attach_depth: 0.5,
@@ -112,7 +112,8 @@ pub fn foreground_mask(
             match background {
                 Some(bg) => {
                     let b = bg.data[i];
-                    !(b > 0.0)
+                    b.is_nan()
+                        || b <= 0.0
                         || z < b - (config.bg_tolerance + config.bg_tolerance_quadratic * b * b)
                 }
                 None => true,
@@ -138,11 +139,44 @@ pub fn foreground_mask(
     for k in keep {
         keep_flag[k] = true;
     }
-    Ok(components
+    let mut mask: Vec<bool> = components
         .label
         .iter()
         .map(|&l| l >= 0 && keep_flag[l as usize])
-        .collect())
+        .collect();
+    for _ in 0..DROPOUT_FILL_PASSES {
+        fill_dropouts(depth, &mut mask);
+    }
+    Ok(mask)
+}
+
+/// Passes of [`fill_dropouts`]: enough for the 1–2 pixel dropouts of depth sensors.
+const DROPOUT_FILL_PASSES: usize = 2;
+
+/// Adds to the mask the pixels *without a reading* that the body surrounds: both
+/// neighbours along a row or a column, or three of the four 4-neighbours, in the mask.
+/// These are sensor dropouts on the body, part of its silhouette (they add no points).
+/// A real hole in the body's outline shows the scene behind it, has a reading, and stays
+/// a hole.
+fn fill_dropouts(depth: &DepthView, mask: &mut [bool]) {
+    let (w, h) = (depth.width, depth.height);
+    let mut add = Vec::new();
+    for row in 1..h.saturating_sub(1) {
+        for col in 1..w.saturating_sub(1) {
+            let i = row * w + col;
+            if mask[i] || depth.data[i] > 0.0 {
+                continue;
+            }
+            let (l, r, u, d) = (mask[i - 1], mask[i + 1], mask[i - w], mask[i + w]);
+            let count = l as u8 + r as u8 + u as u8 + d as u8;
+            if (l && r) || (u && d) || count >= 3 {
+                add.push(i);
+            }
+        }
+    }
+    for i in add {
+        mask[i] = true;
+    }
 }
 
 /// Per-component statistics.

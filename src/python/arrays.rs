@@ -19,11 +19,14 @@ fn err(name: &str, msg: impl std::fmt::Display) -> PyErr {
 }
 
 /// The array behind `obj`, with the checks every argument gets: a numpy array (not a
-/// list), `ndim` dimensions if given, non-empty and C-contiguous.
+/// list), `ndim` dimensions if given, non-empty. Images must also be C-contiguous: a
+/// strided view of a frame would be copied silently on every call of a live loop, so we
+/// say so instead; small arrays (points, vectors) are copied either way.
 fn untyped<'a, 'py>(
     obj: &'a Bound<'py, PyAny>,
     name: &str,
     ndim: Option<usize>,
+    contiguous: bool,
 ) -> PyResult<&'a Bound<'py, PyUntypedArray>> {
     let arr = obj.cast::<PyUntypedArray>().map_err(|_| {
         let ty = obj
@@ -47,7 +50,7 @@ fn untyped<'a, 'py>(
             format!("array is empty (shape {:?})", arr.shape()),
         ));
     }
-    if !arr.is_c_contiguous() {
+    if contiguous && !arr.is_c_contiguous() {
         return Err(err(
             name,
             "array is not C-contiguous; pass numpy.ascontiguousarray(...)",
@@ -64,8 +67,7 @@ macro_rules! convert_from {
             if dt.is_equiv_to(&numpy::dtype::<$t>(py)) {
                 let a = $arr.cast::<PyArrayDyn<$t>>().expect("dtype checked");
                 let ro = a.readonly();
-                let s = ro.as_slice().map_err(|e| err($name, e))?;
-                return Ok(s.iter().map(|&v| v as $out).collect());
+                return Ok(ro.as_array().iter().map(|&v| v as $out).collect());
             }
         )*
         Err(err($name, format!("unsupported dtype {dt}")))
@@ -85,13 +87,14 @@ fn to_i64(arr: &Bound<PyUntypedArray>, name: &str) -> PyResult<Vec<i64>> {
 }
 
 /// A float array (any numeric dtype converted). `finite` rejects NaN and inf.
+/// Non-contiguous input is copied.
 pub fn f64_array(
     obj: &Bound<PyAny>,
     name: &str,
     ndim: Option<usize>,
     finite: bool,
 ) -> PyResult<Arr<f64>> {
-    let arr = untyped(obj, name, ndim)?;
+    let arr = untyped(obj, name, ndim, false)?;
     let shape = arr.shape().to_vec();
     let data = to_f64(arr, name)?;
     if finite {
@@ -106,13 +109,14 @@ pub fn f64_array(
 }
 
 /// Like [`f64_array`] in single precision.
+#[allow(dead_code)] // for the stage bindings to come
 pub fn f32_array(
     obj: &Bound<PyAny>,
     name: &str,
     ndim: Option<usize>,
     finite: bool,
 ) -> PyResult<Arr<f32>> {
-    let arr = untyped(obj, name, ndim)?;
+    let arr = untyped(obj, name, ndim, false)?;
     let shape = arr.shape().to_vec();
     let data = to_f32(arr, name)?;
     if finite {
@@ -128,7 +132,7 @@ pub fn f32_array(
 
 /// An integer array (integer dtypes only; floats are refused so indices stay exact).
 pub fn i64_array(obj: &Bound<PyAny>, name: &str, ndim: Option<usize>) -> PyResult<Arr<i64>> {
-    let arr = untyped(obj, name, ndim)?;
+    let arr = untyped(obj, name, ndim, false)?;
     let shape = arr.shape().to_vec();
     let data = to_i64(arr, name)?;
     Ok(Arr { data, shape })
@@ -136,7 +140,7 @@ pub fn i64_array(obj: &Bound<PyAny>, name: &str, ndim: Option<usize>) -> PyResul
 
 /// A boolean mask of exactly `shape`.
 pub fn bool_array(obj: &Bound<PyAny>, name: &str, shape: &[usize]) -> PyResult<Vec<bool>> {
-    let arr = untyped(obj, name, Some(shape.len()))?;
+    let arr = untyped(obj, name, Some(shape.len()), true)?;
     if arr.shape() != shape {
         return Err(err(
             name,
@@ -146,7 +150,7 @@ pub fn bool_array(obj: &Bound<PyAny>, name: &str, shape: &[usize]) -> PyResult<V
     if arr.dtype().is_equiv_to(&numpy::dtype::<bool>(arr.py())) {
         let a = arr.cast::<PyArrayDyn<bool>>().expect("dtype checked");
         let ro = a.readonly();
-        return Ok(ro.as_slice().map_err(|e| err(name, e))?.to_vec());
+        return Ok(ro.as_array().iter().copied().collect());
     }
     Ok(to_i64(arr, name)
         .map_err(|_| {
@@ -160,10 +164,34 @@ pub fn bool_array(obj: &Bound<PyAny>, name: &str, shape: &[usize]) -> PyResult<V
         .collect())
 }
 
+/// An image (H, W) or (H, W, C) of any numeric dtype as f32; must be C-contiguous.
+#[allow(dead_code)] // for the stage bindings to come
+pub fn image_array(obj: &Bound<PyAny>, name: &str) -> PyResult<Arr<f32>> {
+    let arr = untyped(obj, name, None, true)?;
+    if !(arr.ndim() == 2 || arr.ndim() == 3) {
+        return Err(err(
+            name,
+            format!(
+                "expected an image (H, W) or (H, W, C), got shape {:?}",
+                arr.shape()
+            ),
+        ));
+    }
+    let shape = arr.shape().to_vec();
+    let data = to_f32(arr, name)?;
+    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+        return Err(err(
+            name,
+            format!("holds a non-finite value at flat index {i}"),
+        ));
+    }
+    Ok(Arr { data, shape })
+}
+
 /// A depth image (H, W) in metres: float32/float64 as metres, uint16 as millimetres.
 /// NaN and 0 mean "no reading"; negative or infinite values are errors.
 pub fn depth_array(obj: &Bound<PyAny>, name: &str) -> PyResult<Arr<f32>> {
-    let arr = untyped(obj, name, Some(2))?;
+    let arr = untyped(obj, name, Some(2), true)?;
     let shape = arr.shape().to_vec();
     let is_u16 = arr.dtype().is_equiv_to(&numpy::dtype::<u16>(arr.py()));
     let is_float = arr.dtype().is_equiv_to(&numpy::dtype::<f32>(arr.py()))

@@ -113,8 +113,8 @@ fn pixel_graph<'py>(
 
 /// The person's pixels (H, W) bool. See `depthpose.foreground_mask`.
 #[pyfunction]
-#[pyo3(signature = (depth, background=None, *, min_depth=0.3, max_depth=8.0, bg_tolerance=0.04,
-                    bg_tolerance_quadratic=0.006, max_step=0.12, min_component=40, large_share=0.3))]
+#[pyo3(signature = (depth, background=None, *, min_depth=0.3, max_depth=8.0, bg_tolerance=0.025,
+                    bg_tolerance_quadratic=0.003, max_step=0.25, min_component=40, large_share=0.3))]
 #[allow(clippy::too_many_arguments)]
 fn foreground_mask<'py>(
     py: Python<'py>,

@@ -1,0 +1,43 @@
+"""depthpose: 3-D human pose from depth images and stereo pairs, live on a laptop CPU.
+
+The native core lives in the private module ``depthpose._core``; this package re-exports
+its public names with a typed API. Every error is a :class:`DepthPoseError` (a
+``ValueError``).
+"""
+
+from __future__ import annotations
+
+from . import io, viz
+from ._core import (
+    Camera,
+    DepthPoseError,
+    FileFormatError,
+    InvalidInputError,
+    NoBodyError,
+    __version__,
+    depth_to_points,
+    pixel_graph,
+    surface_normals,
+)
+from .cloud import PointCloud, foreground_mask, point_cloud
+from .io import read_depth, read_image, write_depth
+
+__all__ = [
+    "Camera",
+    "DepthPoseError",
+    "FileFormatError",
+    "InvalidInputError",
+    "NoBodyError",
+    "PointCloud",
+    "__version__",
+    "depth_to_points",
+    "foreground_mask",
+    "io",
+    "pixel_graph",
+    "point_cloud",
+    "read_depth",
+    "read_image",
+    "surface_normals",
+    "viz",
+    "write_depth",
+]
