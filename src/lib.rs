@@ -8,6 +8,7 @@
 pub mod camera;
 pub mod cloud;
 pub mod error;
+pub mod graphcut;
 pub mod io;
 
 #[cfg(feature = "python")]
