@@ -9,6 +9,7 @@ pub mod body;
 pub mod camera;
 pub mod cloud;
 pub mod error;
+pub mod fit;
 pub mod graphcut;
 pub mod io;
 pub mod render;
