@@ -530,17 +530,9 @@ impl BodyShape {
 }
 
 /// The body model: a shape plus the fixed skeleton topology.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct BodyModel {
     pub shape: BodyShape,
-}
-
-impl Default for BodyModel {
-    fn default() -> Self {
-        BodyModel {
-            shape: BodyShape::default(),
-        }
-    }
 }
 
 impl BodyModel {
