@@ -14,8 +14,12 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-/// Newton/bisection stops when the step is below this relative size.
-const ROOT_TOLERANCE: f64 = 4.0 * f64::EPSILON;
+/// Newton/bisection stops when the step is below this relative size: Newton converges
+/// quadratically, so after a step of 1e-9 the error is at rounding level. (Asking for
+/// steps of a few ulps makes the iteration chase rounding noise in H.)
+const ROOT_TOLERANCE: f64 = 1e-9;
+/// |H| below this is a root to rounding precision.
+const H_TOLERANCE: f64 = 4.0 * f64::EPSILON;
 /// Iteration cap; bisection alone halves the bracket each step, so 2 × 64 suffices.
 const MAX_ITERATIONS: usize = 128;
 
@@ -48,7 +52,7 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
         // H = S^{-1/2} − 1 (increasing), H' = −S' / (2 S^{3/2}) with S' = −2·ds.
         let inv_sqrt = 1.0 / s.sqrt();
         let h = inv_sqrt - 1.0;
-        if h == 0.0 {
+        if h.abs() <= H_TOLERANCE {
             return u;
         }
         if h < 0.0 {
@@ -61,7 +65,7 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
         if !(next > lo && next < hi) {
             next = 0.5 * (lo + hi);
         }
-        if (next - u).abs() <= ROOT_TOLERANCE * u.abs() || hi - lo <= ROOT_TOLERANCE * hi {
+        if (next - u).abs() <= ROOT_TOLERANCE * u.abs() || hi - lo <= H_TOLERANCE * hi {
             return next;
         }
         u = next;
