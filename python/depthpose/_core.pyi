@@ -53,4 +53,3 @@ class BodyModel:
         self, pose: npt.NDArray[np.float64]
     ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
-class Camera: ...  # defined in the camera section
