@@ -8,6 +8,7 @@
 mod arrays;
 mod camera;
 mod cloud;
+mod graphcut;
 mod io;
 
 use crate::error::Error;
@@ -61,6 +62,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     camera::register(m)?;
     cloud::register(m)?;
+    graphcut::register(m)?;
     io::register(m)?;
     Ok(())
 }
