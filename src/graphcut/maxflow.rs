@@ -121,8 +121,17 @@ struct Node<C> {
     next: u32,
     /// Time stamp and distance to the terminal of the adoption heuristic.
     ts: u32,
-    dist: u32,
+    /// Saturates at `u16::MAX`: the distance only steers heuristics (see `sat16`).
+    dist: u16,
     flags: u8,
+}
+
+/// A distance stored in 16 bits (keeps a node record at 24 bytes for `f64`). Saturation
+/// only weakens the shortest-path preference on paths longer than 65,535 nodes; the
+/// adoption walk never relies on exact values for correctness.
+#[inline(always)]
+fn sat16(d: u32) -> u16 {
+    d.min(u32::from(u16::MAX)) as u16
 }
 
 impl<C: Capacity> Default for Node<C> {
@@ -663,16 +672,12 @@ impl<C: Capacity> Graph<C> {
 
     #[inline(always)]
     fn activate(&mut self, i: u32) {
-        let iu = i as usize;
-        if self.nodes[iu].next == NONE {
-            self.nodes[iu].next = i;
-            if self.queue_last == NONE {
-                self.queue_first = i;
-            } else {
-                self.nodes[self.queue_last as usize].next = i;
-            }
-            self.queue_last = i;
-        }
+        push_active(
+            &mut self.nodes,
+            &mut self.queue_first,
+            &mut self.queue_last,
+            i,
+        );
     }
 
     #[inline(always)]
@@ -837,118 +842,126 @@ impl<C: Capacity> Graph<C> {
     /// of a path found, or `NONE`.
     #[inline]
     fn grow(&mut self, i: usize) -> u32 {
-        let (lo, hi) = (self.first[i], self.first[i + 1]);
-        let (ts_i, dist_i) = (self.nodes[i].ts, self.nodes[i].dist);
-        if !self.is_sink(i) {
-            for a in lo..hi {
-                let arc = self.arcs[a as usize];
-                if arc.cap > C::ZERO {
-                    let j = arc.head as usize;
-                    if self.nodes[j].parent == NONE {
-                        self.set_tree(j, false);
-                        self.nodes[j].parent = arc.sister;
-                        self.nodes[j].ts = ts_i;
-                        self.nodes[j].dist = dist_i + 1;
-                        self.activate(j as u32);
-                    } else if self.is_sink(j) {
-                        return a;
-                    } else if self.nodes[j].ts <= ts_i && self.nodes[j].dist > dist_i {
-                        // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
-                        self.nodes[j].parent = arc.sister;
-                        self.nodes[j].ts = ts_i;
-                        self.nodes[j].dist = dist_i + 1;
-                    }
-                }
+        // Local slices let the optimiser keep the array pointers in registers.
+        let arcs: &[Arc<C>] = &self.arcs;
+        let nodes: &mut [Node<C>] = &mut self.nodes;
+        let (mut qf, mut ql) = (self.queue_first, self.queue_last);
+        let (lo, hi) = (self.first[i] as usize, self.first[i + 1] as usize);
+        let ni = nodes[i];
+        let (ts_i, dist_i) = (ni.ts, u32::from(ni.dist));
+        let d1 = sat16(dist_i + 1);
+        let sink = ni.flags & FLAG_SINK != 0;
+        let mut found = NONE;
+        for (k, arc) in arcs[lo..hi].iter().enumerate() {
+            // Residual capacity away from the root: i→j in S, j→i in T.
+            let open = if sink {
+                arcs[arc.sister as usize].cap > C::ZERO
+            } else {
+                arc.cap > C::ZERO
+            };
+            if !open {
+                continue;
             }
-        } else {
-            for a in lo..hi {
-                let arc = self.arcs[a as usize];
-                if self.arcs[arc.sister as usize].cap > C::ZERO {
-                    let j = arc.head as usize;
-                    if self.nodes[j].parent == NONE {
-                        self.set_tree(j, true);
-                        self.nodes[j].parent = arc.sister;
-                        self.nodes[j].ts = ts_i;
-                        self.nodes[j].dist = dist_i + 1;
-                        self.activate(j as u32);
-                    } else if !self.is_sink(j) {
-                        return arc.sister;
-                    } else if self.nodes[j].ts <= ts_i && self.nodes[j].dist > dist_i {
-                        self.nodes[j].parent = arc.sister;
-                        self.nodes[j].ts = ts_i;
-                        self.nodes[j].dist = dist_i + 1;
-                    }
-                }
+            let j = arc.head as usize;
+            let nj = &mut nodes[j];
+            if nj.parent == NONE {
+                nj.flags = if sink {
+                    nj.flags | FLAG_SINK
+                } else {
+                    nj.flags & !FLAG_SINK
+                };
+                nj.parent = arc.sister;
+                nj.ts = ts_i;
+                nj.dist = d1;
+                push_active(nodes, &mut qf, &mut ql, j as u32);
+            } else if (nj.flags & FLAG_SINK != 0) != sink {
+                found = if sink { arc.sister } else { (lo + k) as u32 };
+                break;
+            } else if nj.ts <= ts_i && u32::from(nj.dist) > dist_i {
+                // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
+                nj.parent = arc.sister;
+                nj.ts = ts_i;
+                nj.dist = d1;
             }
         }
-        NONE
+        self.queue_first = qf;
+        self.queue_last = ql;
+        found
     }
 
     /// Pushes the bottleneck flow along source → … → tail(mid) → head(mid) → … → sink;
-    /// nodes whose tree arc saturates become orphans.
+    /// nodes whose tree arc saturates become orphans (queued at the front, so those
+    /// nearer the terminals, found last, are adopted first).
     fn augment(&mut self, mid: u32) {
-        let m = self.arcs[mid as usize];
-        let u = self.arcs[m.sister as usize].head;
-        let v = m.head;
+        let arcs: &mut [Arc<C>] = &mut self.arcs;
+        let nodes: &mut [Node<C>] = &mut self.nodes;
+        let orphans = &mut self.orphans;
+        let m = arcs[mid as usize];
+        let u = arcs[m.sister as usize].head as usize;
+        let v = m.head as usize;
         let mut f = m.cap;
-        let mut x = u as usize;
+        let mut x = u;
         loop {
-            let p = self.nodes[x].parent;
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                f = f.min_of(self.nodes[x].tr);
+                f = f.min_of(nodes[x].tr);
                 break;
             }
-            let arc = self.arcs[p as usize];
-            f = f.min_of(self.arcs[arc.sister as usize].cap);
+            let arc = arcs[p as usize];
+            f = f.min_of(arcs[arc.sister as usize].cap);
             x = arc.head as usize;
         }
-        x = v as usize;
+        x = v;
         loop {
-            let p = self.nodes[x].parent;
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                f = f.min_of(-self.nodes[x].tr);
+                f = f.min_of(-nodes[x].tr);
                 break;
             }
-            let arc = self.arcs[p as usize];
+            let arc = arcs[p as usize];
             f = f.min_of(arc.cap);
             x = arc.head as usize;
         }
-        self.arcs[mid as usize].cap -= f;
-        self.arcs[m.sister as usize].cap += f;
-        x = u as usize;
+        arcs[mid as usize].cap -= f;
+        arcs[m.sister as usize].cap += f;
+        x = u;
         loop {
-            let p = self.nodes[x].parent;
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                self.nodes[x].tr -= f;
-                if self.nodes[x].tr <= C::ZERO {
-                    self.make_orphan(x as u32);
+                nodes[x].tr -= f;
+                if nodes[x].tr <= C::ZERO {
+                    nodes[x].parent = ORPHAN;
+                    orphans.push_front(x as u32);
                 }
                 break;
             }
-            let arc = self.arcs[p as usize];
+            let arc = arcs[p as usize];
             let s = arc.sister as usize;
-            self.arcs[s].cap -= f;
-            self.arcs[p as usize].cap += f;
-            if self.arcs[s].cap <= C::ZERO {
-                self.make_orphan(x as u32);
+            arcs[s].cap -= f;
+            arcs[p as usize].cap += f;
+            if arcs[s].cap <= C::ZERO {
+                nodes[x].parent = ORPHAN;
+                orphans.push_front(x as u32);
             }
             x = arc.head as usize;
         }
-        x = v as usize;
+        x = v;
         loop {
-            let p = self.nodes[x].parent;
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                self.nodes[x].tr += f;
-                if self.nodes[x].tr >= C::ZERO {
-                    self.make_orphan(x as u32);
+                nodes[x].tr += f;
+                if nodes[x].tr >= C::ZERO {
+                    nodes[x].parent = ORPHAN;
+                    orphans.push_front(x as u32);
                 }
                 break;
             }
-            let arc = self.arcs[p as usize];
-            self.arcs[p as usize].cap -= f;
-            self.arcs[arc.sister as usize].cap += f;
-            if self.arcs[p as usize].cap <= C::ZERO {
-                self.make_orphan(x as u32);
+            let arc = arcs[p as usize];
+            arcs[p as usize].cap -= f;
+            arcs[arc.sister as usize].cap += f;
+            if arcs[p as usize].cap <= C::ZERO {
+                nodes[x].parent = ORPHAN;
+                orphans.push_front(x as u32);
             }
             x = arc.head as usize;
         }
@@ -965,98 +978,126 @@ impl<C: Capacity> Graph<C> {
         }
     }
 
-    /// Distance from `j` to its tree's terminal, following parents, or `INFINITE_DIST`
-    /// if the path ends at an orphan. Marks the nodes it verifies with the current time.
-    #[inline]
-    fn origin_distance(&mut self, j: usize) -> u32 {
-        let time = self.time;
-        let mut d = 0u32;
-        let mut k = j;
-        loop {
-            if self.nodes[k].ts == time {
-                d += self.nodes[k].dist;
-                break;
-            }
-            let p = self.nodes[k].parent;
-            d += 1;
-            if p == TERMINAL {
-                self.nodes[k].ts = time;
-                self.nodes[k].dist = 1;
-                break;
-            }
-            if p == ORPHAN {
-                return INFINITE_DIST;
-            }
-            k = self.arcs[p as usize].head as usize;
-        }
-        // Record the distances along the verified path for later searches.
-        let mut dd = d;
-        k = j;
-        while self.nodes[k].ts != time {
-            self.nodes[k].ts = time;
-            self.nodes[k].dist = dd;
-            dd -= 1;
-            k = self.arcs[self.nodes[k].parent as usize].head as usize;
-        }
-        d
-    }
-
     fn process_orphan(&mut self, i: usize) {
-        let sink = self.is_sink(i);
-        let (lo, hi) = (self.first[i], self.first[i + 1]);
+        let arcs: &[Arc<C>] = &self.arcs;
+        let nodes: &mut [Node<C>] = &mut self.nodes;
+        let time = self.time;
+        let sink = nodes[i].flags & FLAG_SINK != 0;
+        let (lo, hi) = (self.first[i] as usize, self.first[i + 1] as usize);
         let mut best = NONE;
         let mut best_d = INFINITE_DIST;
         for a in lo..hi {
-            let arc = self.arcs[a as usize];
+            let arc = arcs[a];
             // Residual capacity from the candidate parent towards `i` (S) or from `i`
             // towards the candidate (T).
             let ok = if sink {
                 arc.cap > C::ZERO
             } else {
-                self.arcs[arc.sister as usize].cap > C::ZERO
+                arcs[arc.sister as usize].cap > C::ZERO
             };
             if !ok {
                 continue;
             }
             let j = arc.head as usize;
-            if self.nodes[j].parent == NONE || self.is_sink(j) != sink {
+            let nj = nodes[j];
+            if nj.parent == NONE || (nj.flags & FLAG_SINK != 0) != sink {
                 continue;
             }
-            let d = self.origin_distance(j);
+            let d = origin_distance(arcs, nodes, time, j);
             if d < best_d {
-                best = a;
+                best = a as u32;
                 best_d = d;
             }
         }
         if best != NONE {
-            self.nodes[i].parent = best;
-            self.nodes[i].ts = self.time;
-            self.nodes[i].dist = best_d + 1;
+            nodes[i].parent = best;
+            nodes[i].ts = time;
+            nodes[i].dist = sat16(best_d + 1);
             return;
         }
         // No parent: `i` becomes free; its children become orphans and neighbours that
         // could grow into it become active.
-        self.nodes[i].parent = NONE;
+        nodes[i].parent = NONE;
+        let (mut qf, mut ql) = (self.queue_first, self.queue_last);
         for a in lo..hi {
-            let arc = self.arcs[a as usize];
+            let arc = arcs[a];
             let j = arc.head as usize;
-            let p = self.nodes[j].parent;
-            if p == NONE || self.is_sink(j) != sink {
+            let p = nodes[j].parent;
+            if p == NONE || (nodes[j].flags & FLAG_SINK != 0) != sink {
                 continue;
             }
             let can_grow = if sink {
                 arc.cap > C::ZERO
             } else {
-                self.arcs[arc.sister as usize].cap > C::ZERO
+                arcs[arc.sister as usize].cap > C::ZERO
             };
             if can_grow {
-                self.activate(j as u32);
+                push_active(nodes, &mut qf, &mut ql, j as u32);
             }
-            if p != TERMINAL && p != ORPHAN && self.arcs[p as usize].head as usize == i {
-                self.make_orphan(j as u32);
+            if p != TERMINAL && p != ORPHAN && arcs[p as usize].head as usize == i {
+                nodes[j].parent = ORPHAN;
+                self.orphans.push_back(j as u32);
             }
         }
+        self.queue_first = qf;
+        self.queue_last = ql;
     }
+}
+
+/// Appends `i` to the active queue (a linked list through `next`) unless queued.
+#[inline(always)]
+fn push_active<C: Capacity>(nodes: &mut [Node<C>], first: &mut u32, last: &mut u32, i: u32) {
+    let iu = i as usize;
+    if nodes[iu].next == NONE {
+        nodes[iu].next = i;
+        if *last == NONE {
+            *first = i;
+        } else {
+            nodes[*last as usize].next = i;
+        }
+        *last = i;
+    }
+}
+
+/// Distance from `j` to its tree's terminal, following parents, or `INFINITE_DIST` if
+/// the path ends at an orphan. Marks the nodes it verifies with `time`, recording their
+/// distances for later searches.
+#[inline]
+fn origin_distance<C: Capacity>(
+    arcs: &[Arc<C>],
+    nodes: &mut [Node<C>],
+    time: u32,
+    j: usize,
+) -> u32 {
+    let mut d = 0u32;
+    let mut k = j;
+    loop {
+        let nk = nodes[k];
+        if nk.ts == time {
+            d += u32::from(nk.dist);
+            break;
+        }
+        let p = nk.parent;
+        d += 1;
+        if p == TERMINAL {
+            nodes[k].ts = time;
+            nodes[k].dist = 1;
+            break;
+        }
+        if p == ORPHAN {
+            return INFINITE_DIST;
+        }
+        k = arcs[p as usize].head as usize;
+    }
+    let mut dd = d;
+    k = j;
+    while nodes[k].ts != time {
+        nodes[k].ts = time;
+        nodes[k].dist = sat16(dd);
+        dd -= 1;
+        k = arcs[nodes[k].parent as usize].head as usize;
+    }
+    d
 }
 
 /// Edges of an `h`×`w` pixel grid (row-major node ids), 4- or 8-connected: right, down
@@ -1282,6 +1323,22 @@ mod tests {
         assert!(g.add_edges(&[0], &[1, 0], &[1.0], &[1.0]).is_err());
         assert!(g.set_tweights(0, 1.0, 1.0).is_err()); // not tracked
         assert!(grid_edges(2, 2, 6).is_err());
+    }
+
+    #[test]
+    fn grid_graph_memory_per_node() {
+        // 4 arcs of 16 bytes, a 24-byte node record and a 4-byte arc offset per node.
+        let (h, w) = (64, 64);
+        let e = grid_edges(h, w, 4).unwrap();
+        let (s, d): (Vec<u32>, Vec<u32>) = e.iter().map(|&[i, j]| (i, j)).unzip();
+        let c = vec![1.0; e.len()];
+        let mut g = Graph::<f64>::with_capacity(h * w, e.len());
+        g.add_edges(&s, &d, &c, &c).unwrap();
+        g.add_tweights(0, 1.0, 0.0).unwrap();
+        g.add_tweights(h * w - 1, 0.0, 1.0).unwrap();
+        assert_eq!(g.maxflow(), 1.0);
+        let per_node = g.memory_bytes() as f64 / (h * w) as f64;
+        assert!(per_node <= 92.0, "{per_node} bytes per node");
     }
 
     #[test]
