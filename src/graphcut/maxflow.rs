@@ -110,6 +110,43 @@ const INFINITE_DIST: u32 = u32::MAX;
 const FLAG_SINK: u8 = 1;
 const FLAG_CHANGED: u8 = 2;
 
+/// Search state of a node.
+#[derive(Clone, Copy, Debug)]
+struct Node<C> {
+    /// Residual terminal capacity: `> 0` from the source, `< 0` to the sink.
+    tr: C,
+    /// Arc to the parent in the search tree, or `NONE` (free), `TERMINAL`, `ORPHAN`.
+    parent: u32,
+    /// Active queue as a linked list (`NONE` = not queued, self = last).
+    next: u32,
+    /// Time stamp and distance to the terminal of the adoption heuristic.
+    ts: u32,
+    /// Saturates at `u16::MAX`: the distance only steers heuristics (see `sat16`).
+    dist: u16,
+    flags: u8,
+}
+
+/// A distance stored in 16 bits (keeps a node record at 24 bytes for `f64`). Saturation
+/// only weakens the shortest-path preference on paths longer than 65,535 nodes; the
+/// adoption walk never relies on exact values for correctness.
+#[inline(always)]
+fn sat16(d: u32) -> u16 {
+    d.min(u32::from(u16::MAX)) as u16
+}
+
+impl<C: Capacity> Default for Node<C> {
+    fn default() -> Self {
+        Node {
+            tr: C::ZERO,
+            parent: NONE,
+            next: NONE,
+            ts: 0,
+            dist: 0,
+            flags: 0,
+        }
+    }
+}
+
 /// One direction of an edge: its head, its reverse arc and its residual capacity.
 #[derive(Clone, Copy, Debug, Default)]
 struct Arc<C> {
@@ -133,18 +170,14 @@ pub struct Graph<C: Capacity> {
     /// CSR: arcs of node `i` are `arcs[first[i]..first[i + 1]]`.
     first: Vec<u32>,
     arcs: Vec<Arc<C>>,
-    /// Arc i→j of edge `k` (in order of addition), `NONE` for self-loops.
+    /// Arc i→j of edge `k` (in order of addition), `NONE` for self-loops; kept only
+    /// after [`Graph::keep_edge_index`] (4 bytes per edge).
     edge_arc: Vec<u32>,
+    index_edges: bool,
+    /// Edges in the built arc arrays (including self-loops, which have no arcs).
     n_edges: usize,
-    /// Residual terminal capacity: `> 0` from the source, `< 0` to the sink.
-    tr: Vec<C>,
-    /// Arc to the parent in the search tree, or `NONE` (free), `TERMINAL`, `ORPHAN`.
-    parent: Vec<u32>,
-    /// Active queue as a linked list (`NONE` = not queued, self = last).
-    next: Vec<u32>,
-    ts: Vec<u32>,
-    dist: Vec<u32>,
-    flags: Vec<u8>,
+    /// Per-node search state (one record per node, so a visit touches one cache line).
+    nodes: Vec<Node<C>>,
     /// Nodes whose terminal capacities changed since the last solve.
     changed: Vec<u32>,
     /// Accumulated terminal capacities per node, kept only for `set_tweights`.
@@ -173,13 +206,9 @@ impl<C: Capacity> Graph<C> {
             first: vec![0; n + 1],
             arcs: Vec::new(),
             edge_arc: Vec::new(),
+            index_edges: false,
             n_edges: 0,
-            tr: vec![C::ZERO; n],
-            parent: vec![NONE; n],
-            next: vec![NONE; n],
-            ts: vec![0; n],
-            dist: vec![0; n],
-            flags: vec![0; n],
+            nodes: vec![Node::default(); n],
             changed: Vec::new(),
             terminal_caps: None,
             flow: C::ZERO,
@@ -197,6 +226,12 @@ impl<C: Capacity> Graph<C> {
         if self.terminal_caps.is_none() {
             self.terminal_caps = Some(vec![[C::ZERO; 2]; self.n]);
         }
+    }
+
+    /// Keeps the arc of every edge so that edges can be addressed by index later
+    /// ([`Graph::set_edge_caps`], [`Graph::edge_residual`]). Call before the first solve.
+    pub fn keep_edge_index(&mut self) {
+        self.index_edges = true;
     }
 
     /// Number of nodes.
@@ -222,13 +257,7 @@ impl<C: Capacity> Graph<C> {
             + self.arcs.capacity() * size_of::<Arc<C>>()
             + self.edge_arc.capacity() * 4
             + self.pending.capacity() * size_of::<(u32, u32, C, C)>()
-            + self.tr.capacity() * size_of::<C>()
-            + (self.parent.capacity()
-                + self.next.capacity()
-                + self.ts.capacity()
-                + self.dist.capacity())
-                * 4
-            + self.flags.capacity()
+            + self.nodes.capacity() * size_of::<Node<C>>()
             + self.changed.capacity() * 4
             + self
                 .terminal_caps
@@ -438,7 +467,7 @@ impl<C: Capacity> Graph<C> {
             t[i][0] += d_source;
             t[i][1] += d_sink;
         }
-        let tr = self.tr[i];
+        let tr = self.nodes[i].tr;
         let (mut rs, mut rt) = if tr > C::ZERO {
             (tr, C::ZERO)
         } else {
@@ -447,9 +476,9 @@ impl<C: Capacity> Graph<C> {
         rs += d_source;
         rt += d_sink;
         self.flow += rs.min_of(rt);
-        self.tr[i] = rs - rt;
-        if self.trees_valid && self.flags[i] & FLAG_CHANGED == 0 {
-            self.flags[i] |= FLAG_CHANGED;
+        self.nodes[i].tr = rs - rt;
+        if self.trees_valid && self.nodes[i].flags & FLAG_CHANGED == 0 {
+            self.nodes[i].flags |= FLAG_CHANGED;
             self.changed.push(i as u32);
         }
     }
@@ -457,15 +486,29 @@ impl<C: Capacity> Graph<C> {
     /// Builds the CSR arc arrays from all edges (keeping residuals of existing arcs).
     fn build(&mut self) {
         let mut edges: Vec<(u32, u32, C, C)> = Vec::with_capacity(self.n_edges());
-        for &a in &self.edge_arc {
-            if a == NONE {
-                edges.push((0, 0, C::ZERO, C::ZERO));
-                continue;
+        if self.index_edges {
+            for &a in &self.edge_arc {
+                if a == NONE {
+                    edges.push((0, 0, C::ZERO, C::ZERO));
+                    continue;
+                }
+                let arc = self.arcs[a as usize];
+                let sis = self.arcs[arc.sister as usize];
+                edges.push((sis.head, arc.head, arc.cap, sis.cap));
             }
-            let arc = self.arcs[a as usize];
-            let sis = self.arcs[arc.sister as usize];
-            edges.push((sis.head, arc.head, arc.cap, sis.cap));
+        } else {
+            // Without an index, recover each built edge from its lower-numbered arc.
+            for i in 0..self.n {
+                for a in self.first[i]..self.first[i + 1] {
+                    let arc = self.arcs[a as usize];
+                    if a < arc.sister {
+                        let sis = self.arcs[arc.sister as usize];
+                        edges.push((i as u32, arc.head, arc.cap, sis.cap));
+                    }
+                }
+            }
         }
+        let n_edges = self.n_edges + self.pending.len();
         edges.append(&mut self.pending);
         self.pending = Vec::new();
         let n = self.n;
@@ -483,18 +526,24 @@ impl<C: Capacity> Graph<C> {
             acc += deg[i];
         }
         first[n] = acc;
-        let mut pos = first.clone();
+        // Each node's arcs are filled from the end, so the most recently added edge is
+        // scanned first (like the linked arc lists of the reference implementation; the
+        // scan order shapes the search trees and measurably affects speed on grids).
+        let mut pos: Vec<u32> = first[1..].to_vec();
         let mut arcs = vec![Arc::default(); acc as usize];
-        let mut edge_arc = Vec::with_capacity(edges.len());
+        let keep = self.index_edges;
+        let mut edge_arc = Vec::with_capacity(if keep { edges.len() } else { 0 });
         for &(i, j, c, r) in &edges {
             if i == j {
-                edge_arc.push(NONE);
+                if keep {
+                    edge_arc.push(NONE);
+                }
                 continue;
             }
+            pos[i as usize] -= 1;
             let a = pos[i as usize];
-            pos[i as usize] += 1;
+            pos[j as usize] -= 1;
             let b = pos[j as usize];
-            pos[j as usize] += 1;
             arcs[a as usize] = Arc {
                 head: j,
                 sister: b,
@@ -505,9 +554,11 @@ impl<C: Capacity> Graph<C> {
                 sister: a,
                 cap: r,
             };
-            edge_arc.push(a);
+            if keep {
+                edge_arc.push(a);
+            }
         }
-        self.n_edges = edges.len();
+        self.n_edges = n_edges;
         self.first = first;
         self.arcs = arcs;
         self.edge_arc = edge_arc;
@@ -517,7 +568,7 @@ impl<C: Capacity> Graph<C> {
     /// Builds the arc arrays now (otherwise done by the first [`Graph::maxflow`]), so
     /// that [`Graph::set_edge_caps`] can be used.
     pub fn finalize(&mut self) {
-        if !self.pending.is_empty() || self.edge_arc.len() != self.n_edges() {
+        if !self.pending.is_empty() || self.index_edges && self.edge_arc.len() != self.n_edges {
             self.build();
         }
     }
@@ -529,12 +580,14 @@ impl<C: Capacity> Graph<C> {
         for a in &mut self.arcs {
             a.cap = C::ZERO;
         }
-        self.tr.fill(C::ZERO);
+        for v in &mut self.nodes {
+            v.tr = C::ZERO;
+        }
         if let Some(t) = &mut self.terminal_caps {
             t.fill([C::ZERO; 2]);
         }
         for &i in &self.changed {
-            self.flags[i as usize] &= !FLAG_CHANGED;
+            self.nodes[i as usize].flags &= !FLAG_CHANGED;
         }
         self.changed.clear();
         self.flow = C::ZERO;
@@ -555,6 +608,12 @@ impl<C: Capacity> Graph<C> {
 
     /// Sets the capacities of edge `k` after [`Graph::reset`] (before any solve).
     pub fn set_edge_caps(&mut self, k: usize, cap: C, rev_cap: C) -> Result<()> {
+        if !self.index_edges {
+            return Err(Error::invalid(
+                "k",
+                "edges are not indexed; call keep_edge_index() before building",
+            ));
+        }
         self.finalize();
         if k >= self.n_edges {
             return Err(Error::invalid(
@@ -578,7 +637,7 @@ impl<C: Capacity> Graph<C> {
     /// [`Graph::maxflow`] (nodes that can reach the sink in the residual graph).
     #[inline]
     pub fn is_sink_side(&self, i: usize) -> bool {
-        self.parent[i] != NONE && self.flags[i] & FLAG_SINK != 0
+        self.nodes[i].parent != NONE && self.nodes[i].flags & FLAG_SINK != 0
     }
 
     /// The side of every node (true = sink side), see [`Graph::is_sink_side`].
@@ -593,7 +652,8 @@ impl<C: Capacity> Graph<C> {
         }
     }
 
-    /// The residual capacity of edge `k` in both directions (i→j, j→i).
+    /// The residual capacity of edge `k` in both directions (i→j, j→i); `None` unless
+    /// the graph was built after [`Graph::keep_edge_index`].
     pub fn edge_residual(&self, k: usize) -> Option<(C, C)> {
         let a = *self.edge_arc.get(k)?;
         if a == NONE {
@@ -605,23 +665,19 @@ impl<C: Capacity> Graph<C> {
 
     /// The signed residual terminal capacity of `i` (> 0 source→i, < 0 i→sink).
     pub fn terminal_residual(&self, i: usize) -> C {
-        self.tr[i]
+        self.nodes[i].tr
     }
 
     // ----- the active queue -----
 
     #[inline(always)]
     fn activate(&mut self, i: u32) {
-        let iu = i as usize;
-        if self.next[iu] == NONE {
-            self.next[iu] = i;
-            if self.queue_last == NONE {
-                self.queue_first = i;
-            } else {
-                self.next[self.queue_last as usize] = i;
-            }
-            self.queue_last = i;
-        }
+        push_active(
+            &mut self.nodes,
+            &mut self.queue_first,
+            &mut self.queue_last,
+            i,
+        );
     }
 
     #[inline(always)]
@@ -630,34 +686,34 @@ impl<C: Capacity> Graph<C> {
         if i == NONE {
             return None;
         }
-        let nx = self.next[i as usize];
+        let nx = self.nodes[i as usize].next;
         if nx == i {
             self.queue_first = NONE;
             self.queue_last = NONE;
         } else {
             self.queue_first = nx;
         }
-        self.next[i as usize] = NONE;
+        self.nodes[i as usize].next = NONE;
         Some(i)
     }
 
     #[inline(always)]
     fn is_sink(&self, i: usize) -> bool {
-        self.flags[i] & FLAG_SINK != 0
+        self.nodes[i].flags & FLAG_SINK != 0
     }
 
     #[inline(always)]
     fn set_tree(&mut self, i: usize, sink: bool) {
         if sink {
-            self.flags[i] |= FLAG_SINK;
+            self.nodes[i].flags |= FLAG_SINK;
         } else {
-            self.flags[i] &= !FLAG_SINK;
+            self.nodes[i].flags &= !FLAG_SINK;
         }
     }
 
     #[inline(always)]
     fn make_orphan(&mut self, i: u32) {
-        self.parent[i as usize] = ORPHAN;
+        self.nodes[i as usize].parent = ORPHAN;
         self.orphans.push_back(i);
     }
 
@@ -667,23 +723,23 @@ impl<C: Capacity> Graph<C> {
         self.orphans.clear();
         self.time = 0;
         for i in 0..self.n {
-            self.next[i] = NONE;
-            self.ts[i] = 0;
-            self.flags[i] &= !FLAG_CHANGED;
-            let t = self.tr[i];
+            self.nodes[i].next = NONE;
+            self.nodes[i].ts = 0;
+            self.nodes[i].flags &= !FLAG_CHANGED;
+            let t = self.nodes[i].tr;
             if t > C::ZERO {
                 self.set_tree(i, false);
-                self.parent[i] = TERMINAL;
-                self.dist[i] = 1;
+                self.nodes[i].parent = TERMINAL;
+                self.nodes[i].dist = 1;
                 self.activate(i as u32);
             } else if t < C::ZERO {
                 self.set_tree(i, true);
-                self.parent[i] = TERMINAL;
-                self.dist[i] = 1;
+                self.nodes[i].parent = TERMINAL;
+                self.nodes[i].dist = 1;
                 self.activate(i as u32);
             } else {
-                self.parent[i] = NONE;
-                self.dist[i] = 0;
+                self.nodes[i].parent = NONE;
+                self.nodes[i].dist = 0;
             }
         }
         self.changed.clear();
@@ -700,11 +756,11 @@ impl<C: Capacity> Graph<C> {
         let changed = std::mem::take(&mut self.changed);
         for &iu in &changed {
             let i = iu as usize;
-            self.flags[i] &= !FLAG_CHANGED;
-            let t = self.tr[i];
-            let in_tree = self.parent[i] != NONE;
+            self.nodes[i].flags &= !FLAG_CHANGED;
+            let t = self.nodes[i].tr;
+            let in_tree = self.nodes[i].parent != NONE;
             if t == C::ZERO {
-                if self.parent[i] == TERMINAL {
+                if self.nodes[i].parent == TERMINAL {
                     self.make_orphan(iu);
                 } else if in_tree {
                     self.activate(iu);
@@ -718,7 +774,7 @@ impl<C: Capacity> Graph<C> {
                 // again once it leaves the new tree.
                 for a in self.first[i]..self.first[i + 1] {
                     let j = self.arcs[a as usize].head as usize;
-                    let p = self.parent[j];
+                    let p = self.nodes[j].parent;
                     if p != NONE {
                         self.activate(j as u32);
                     }
@@ -732,9 +788,9 @@ impl<C: Capacity> Graph<C> {
                 }
             }
             self.set_tree(i, want_sink);
-            self.parent[i] = TERMINAL;
-            self.ts[i] = self.time;
-            self.dist[i] = 1;
+            self.nodes[i].parent = TERMINAL;
+            self.nodes[i].ts = self.time;
+            self.nodes[i].dist = 1;
             self.activate(iu);
         }
         self.changed = changed;
@@ -745,7 +801,7 @@ impl<C: Capacity> Graph<C> {
     /// Computes the maximum flow (and so the minimum cut) and returns its value. Called
     /// again after terminal capacity changes, it continues from the previous state.
     pub fn maxflow(&mut self) -> C {
-        if !self.pending.is_empty() || self.edge_arc.len() != self.n_edges() {
+        if !self.pending.is_empty() || self.index_edges && self.edge_arc.len() != self.n_edges {
             self.build();
         }
         if self.trees_valid {
@@ -761,12 +817,12 @@ impl<C: Capacity> Graph<C> {
     fn run(&mut self) {
         let mut current = NONE;
         loop {
-            let i = if current != NONE && self.parent[current as usize] != NONE {
+            let i = if current != NONE && self.nodes[current as usize].parent != NONE {
                 current
             } else {
                 match self.pop_active() {
                     None => break,
-                    Some(i) if self.parent[i as usize] == NONE => continue,
+                    Some(i) if self.nodes[i as usize].parent == NONE => continue,
                     Some(i) => i,
                 }
             };
@@ -786,118 +842,126 @@ impl<C: Capacity> Graph<C> {
     /// of a path found, or `NONE`.
     #[inline]
     fn grow(&mut self, i: usize) -> u32 {
-        let (lo, hi) = (self.first[i], self.first[i + 1]);
-        let (ts_i, dist_i) = (self.ts[i], self.dist[i]);
-        if !self.is_sink(i) {
-            for a in lo..hi {
-                let arc = self.arcs[a as usize];
-                if arc.cap > C::ZERO {
-                    let j = arc.head as usize;
-                    if self.parent[j] == NONE {
-                        self.set_tree(j, false);
-                        self.parent[j] = arc.sister;
-                        self.ts[j] = ts_i;
-                        self.dist[j] = dist_i + 1;
-                        self.activate(j as u32);
-                    } else if self.is_sink(j) {
-                        return a;
-                    } else if self.ts[j] <= ts_i && self.dist[j] > dist_i {
-                        // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
-                        self.parent[j] = arc.sister;
-                        self.ts[j] = ts_i;
-                        self.dist[j] = dist_i + 1;
-                    }
-                }
+        // Local slices let the optimiser keep the array pointers in registers.
+        let arcs: &[Arc<C>] = &self.arcs;
+        let nodes: &mut [Node<C>] = &mut self.nodes;
+        let (mut qf, mut ql) = (self.queue_first, self.queue_last);
+        let (lo, hi) = (self.first[i] as usize, self.first[i + 1] as usize);
+        let ni = nodes[i];
+        let (ts_i, dist_i) = (ni.ts, u32::from(ni.dist));
+        let d1 = sat16(dist_i + 1);
+        let sink = ni.flags & FLAG_SINK != 0;
+        let mut found = NONE;
+        for (k, arc) in arcs[lo..hi].iter().enumerate() {
+            // Residual capacity away from the root: i→j in S, j→i in T.
+            let open = if sink {
+                arcs[arc.sister as usize].cap > C::ZERO
+            } else {
+                arc.cap > C::ZERO
+            };
+            if !open {
+                continue;
             }
-        } else {
-            for a in lo..hi {
-                let arc = self.arcs[a as usize];
-                if self.arcs[arc.sister as usize].cap > C::ZERO {
-                    let j = arc.head as usize;
-                    if self.parent[j] == NONE {
-                        self.set_tree(j, true);
-                        self.parent[j] = arc.sister;
-                        self.ts[j] = ts_i;
-                        self.dist[j] = dist_i + 1;
-                        self.activate(j as u32);
-                    } else if !self.is_sink(j) {
-                        return arc.sister;
-                    } else if self.ts[j] <= ts_i && self.dist[j] > dist_i {
-                        self.parent[j] = arc.sister;
-                        self.ts[j] = ts_i;
-                        self.dist[j] = dist_i + 1;
-                    }
-                }
+            let j = arc.head as usize;
+            let nj = &mut nodes[j];
+            if nj.parent == NONE {
+                nj.flags = if sink {
+                    nj.flags | FLAG_SINK
+                } else {
+                    nj.flags & !FLAG_SINK
+                };
+                nj.parent = arc.sister;
+                nj.ts = ts_i;
+                nj.dist = d1;
+                push_active(nodes, &mut qf, &mut ql, j as u32);
+            } else if (nj.flags & FLAG_SINK != 0) != sink {
+                found = if sink { arc.sister } else { (lo + k) as u32 };
+                break;
+            } else if nj.ts <= ts_i && u32::from(nj.dist) > dist_i {
+                // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
+                nj.parent = arc.sister;
+                nj.ts = ts_i;
+                nj.dist = d1;
             }
         }
-        NONE
+        self.queue_first = qf;
+        self.queue_last = ql;
+        found
     }
 
     /// Pushes the bottleneck flow along source → … → tail(mid) → head(mid) → … → sink;
-    /// nodes whose tree arc saturates become orphans.
+    /// nodes whose tree arc saturates become orphans (queued at the front, so those
+    /// nearer the terminals, found last, are adopted first).
     fn augment(&mut self, mid: u32) {
-        let m = self.arcs[mid as usize];
-        let u = self.arcs[m.sister as usize].head;
-        let v = m.head;
+        let arcs: &mut [Arc<C>] = &mut self.arcs;
+        let nodes: &mut [Node<C>] = &mut self.nodes;
+        let orphans = &mut self.orphans;
+        let m = arcs[mid as usize];
+        let u = arcs[m.sister as usize].head as usize;
+        let v = m.head as usize;
         let mut f = m.cap;
-        let mut x = u as usize;
+        let mut x = u;
         loop {
-            let p = self.parent[x];
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                f = f.min_of(self.tr[x]);
+                f = f.min_of(nodes[x].tr);
                 break;
             }
-            let arc = self.arcs[p as usize];
-            f = f.min_of(self.arcs[arc.sister as usize].cap);
+            let arc = arcs[p as usize];
+            f = f.min_of(arcs[arc.sister as usize].cap);
             x = arc.head as usize;
         }
-        x = v as usize;
+        x = v;
         loop {
-            let p = self.parent[x];
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                f = f.min_of(-self.tr[x]);
+                f = f.min_of(-nodes[x].tr);
                 break;
             }
-            let arc = self.arcs[p as usize];
+            let arc = arcs[p as usize];
             f = f.min_of(arc.cap);
             x = arc.head as usize;
         }
-        self.arcs[mid as usize].cap -= f;
-        self.arcs[m.sister as usize].cap += f;
-        x = u as usize;
+        arcs[mid as usize].cap -= f;
+        arcs[m.sister as usize].cap += f;
+        x = u;
         loop {
-            let p = self.parent[x];
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                self.tr[x] -= f;
-                if self.tr[x] <= C::ZERO {
-                    self.make_orphan(x as u32);
+                nodes[x].tr -= f;
+                if nodes[x].tr <= C::ZERO {
+                    nodes[x].parent = ORPHAN;
+                    orphans.push_front(x as u32);
                 }
                 break;
             }
-            let arc = self.arcs[p as usize];
+            let arc = arcs[p as usize];
             let s = arc.sister as usize;
-            self.arcs[s].cap -= f;
-            self.arcs[p as usize].cap += f;
-            if self.arcs[s].cap <= C::ZERO {
-                self.make_orphan(x as u32);
+            arcs[s].cap -= f;
+            arcs[p as usize].cap += f;
+            if arcs[s].cap <= C::ZERO {
+                nodes[x].parent = ORPHAN;
+                orphans.push_front(x as u32);
             }
             x = arc.head as usize;
         }
-        x = v as usize;
+        x = v;
         loop {
-            let p = self.parent[x];
+            let p = nodes[x].parent;
             if p == TERMINAL {
-                self.tr[x] += f;
-                if self.tr[x] >= C::ZERO {
-                    self.make_orphan(x as u32);
+                nodes[x].tr += f;
+                if nodes[x].tr >= C::ZERO {
+                    nodes[x].parent = ORPHAN;
+                    orphans.push_front(x as u32);
                 }
                 break;
             }
-            let arc = self.arcs[p as usize];
-            self.arcs[p as usize].cap -= f;
-            self.arcs[arc.sister as usize].cap += f;
-            if self.arcs[p as usize].cap <= C::ZERO {
-                self.make_orphan(x as u32);
+            let arc = arcs[p as usize];
+            arcs[p as usize].cap -= f;
+            arcs[arc.sister as usize].cap += f;
+            if arcs[p as usize].cap <= C::ZERO {
+                nodes[x].parent = ORPHAN;
+                orphans.push_front(x as u32);
             }
             x = arc.head as usize;
         }
@@ -907,105 +971,133 @@ impl<C: Capacity> Graph<C> {
     fn adopt(&mut self) {
         while let Some(i) = self.orphans.pop_front() {
             // A queued orphan may have been made a root since (dynamic updates).
-            if self.parent[i as usize] != ORPHAN {
+            if self.nodes[i as usize].parent != ORPHAN {
                 continue;
             }
             self.process_orphan(i as usize);
         }
     }
 
-    /// Distance from `j` to its tree's terminal, following parents, or `INFINITE_DIST`
-    /// if the path ends at an orphan. Marks the nodes it verifies with the current time.
-    #[inline]
-    fn origin_distance(&mut self, j: usize) -> u32 {
-        let time = self.time;
-        let mut d = 0u32;
-        let mut k = j;
-        loop {
-            if self.ts[k] == time {
-                d += self.dist[k];
-                break;
-            }
-            let p = self.parent[k];
-            d += 1;
-            if p == TERMINAL {
-                self.ts[k] = time;
-                self.dist[k] = 1;
-                break;
-            }
-            if p == ORPHAN {
-                return INFINITE_DIST;
-            }
-            k = self.arcs[p as usize].head as usize;
-        }
-        // Record the distances along the verified path for later searches.
-        let mut dd = d;
-        k = j;
-        while self.ts[k] != time {
-            self.ts[k] = time;
-            self.dist[k] = dd;
-            dd -= 1;
-            k = self.arcs[self.parent[k] as usize].head as usize;
-        }
-        d
-    }
-
     fn process_orphan(&mut self, i: usize) {
-        let sink = self.is_sink(i);
-        let (lo, hi) = (self.first[i], self.first[i + 1]);
+        let arcs: &[Arc<C>] = &self.arcs;
+        let nodes: &mut [Node<C>] = &mut self.nodes;
+        let time = self.time;
+        let sink = nodes[i].flags & FLAG_SINK != 0;
+        let (lo, hi) = (self.first[i] as usize, self.first[i + 1] as usize);
         let mut best = NONE;
         let mut best_d = INFINITE_DIST;
         for a in lo..hi {
-            let arc = self.arcs[a as usize];
+            let arc = arcs[a];
             // Residual capacity from the candidate parent towards `i` (S) or from `i`
             // towards the candidate (T).
             let ok = if sink {
                 arc.cap > C::ZERO
             } else {
-                self.arcs[arc.sister as usize].cap > C::ZERO
+                arcs[arc.sister as usize].cap > C::ZERO
             };
             if !ok {
                 continue;
             }
             let j = arc.head as usize;
-            if self.parent[j] == NONE || self.is_sink(j) != sink {
+            let nj = nodes[j];
+            if nj.parent == NONE || (nj.flags & FLAG_SINK != 0) != sink {
                 continue;
             }
-            let d = self.origin_distance(j);
+            let d = origin_distance(arcs, nodes, time, j);
             if d < best_d {
-                best = a;
+                best = a as u32;
                 best_d = d;
             }
         }
         if best != NONE {
-            self.parent[i] = best;
-            self.ts[i] = self.time;
-            self.dist[i] = best_d + 1;
+            nodes[i].parent = best;
+            nodes[i].ts = time;
+            nodes[i].dist = sat16(best_d + 1);
             return;
         }
         // No parent: `i` becomes free; its children become orphans and neighbours that
         // could grow into it become active.
-        self.parent[i] = NONE;
+        nodes[i].parent = NONE;
+        let (mut qf, mut ql) = (self.queue_first, self.queue_last);
         for a in lo..hi {
-            let arc = self.arcs[a as usize];
+            let arc = arcs[a];
             let j = arc.head as usize;
-            let p = self.parent[j];
-            if p == NONE || self.is_sink(j) != sink {
+            let p = nodes[j].parent;
+            if p == NONE || (nodes[j].flags & FLAG_SINK != 0) != sink {
                 continue;
             }
             let can_grow = if sink {
                 arc.cap > C::ZERO
             } else {
-                self.arcs[arc.sister as usize].cap > C::ZERO
+                arcs[arc.sister as usize].cap > C::ZERO
             };
             if can_grow {
-                self.activate(j as u32);
+                push_active(nodes, &mut qf, &mut ql, j as u32);
             }
-            if p != TERMINAL && p != ORPHAN && self.arcs[p as usize].head as usize == i {
-                self.make_orphan(j as u32);
+            if p != TERMINAL && p != ORPHAN && arcs[p as usize].head as usize == i {
+                nodes[j].parent = ORPHAN;
+                self.orphans.push_back(j as u32);
             }
         }
+        self.queue_first = qf;
+        self.queue_last = ql;
     }
+}
+
+/// Appends `i` to the active queue (a linked list through `next`) unless queued.
+#[inline(always)]
+fn push_active<C: Capacity>(nodes: &mut [Node<C>], first: &mut u32, last: &mut u32, i: u32) {
+    let iu = i as usize;
+    if nodes[iu].next == NONE {
+        nodes[iu].next = i;
+        if *last == NONE {
+            *first = i;
+        } else {
+            nodes[*last as usize].next = i;
+        }
+        *last = i;
+    }
+}
+
+/// Distance from `j` to its tree's terminal, following parents, or `INFINITE_DIST` if
+/// the path ends at an orphan. Marks the nodes it verifies with `time`, recording their
+/// distances for later searches.
+#[inline]
+fn origin_distance<C: Capacity>(
+    arcs: &[Arc<C>],
+    nodes: &mut [Node<C>],
+    time: u32,
+    j: usize,
+) -> u32 {
+    let mut d = 0u32;
+    let mut k = j;
+    loop {
+        let nk = nodes[k];
+        if nk.ts == time {
+            d += u32::from(nk.dist);
+            break;
+        }
+        let p = nk.parent;
+        d += 1;
+        if p == TERMINAL {
+            nodes[k].ts = time;
+            nodes[k].dist = 1;
+            break;
+        }
+        if p == ORPHAN {
+            return INFINITE_DIST;
+        }
+        k = arcs[p as usize].head as usize;
+    }
+    let mut dd = d;
+    k = j;
+    while nodes[k].ts != time {
+        nodes[k].ts = time;
+        nodes[k].dist = sat16(dd);
+        dd -= 1;
+        k = arcs[nodes[k].parent as usize].head as usize;
+    }
+    d
 }
 
 /// Edges of an `h`×`w` pixel grid (row-major node ids), 4- or 8-connected: right, down
@@ -1095,6 +1187,7 @@ mod tests {
     fn graph_of(p: &Problem) -> Graph<i64> {
         let mut g = Graph::new(p.n);
         g.track_terminal_caps();
+        g.keep_edge_index();
         for &(i, j, c, r) in &p.edges {
             g.add_edge(i, j, c, r).unwrap();
         }
@@ -1230,6 +1323,22 @@ mod tests {
         assert!(g.add_edges(&[0], &[1, 0], &[1.0], &[1.0]).is_err());
         assert!(g.set_tweights(0, 1.0, 1.0).is_err()); // not tracked
         assert!(grid_edges(2, 2, 6).is_err());
+    }
+
+    #[test]
+    fn grid_graph_memory_per_node() {
+        // 4 arcs of 16 bytes, a 24-byte node record and a 4-byte arc offset per node.
+        let (h, w) = (64, 64);
+        let e = grid_edges(h, w, 4).unwrap();
+        let (s, d): (Vec<u32>, Vec<u32>) = e.iter().map(|&[i, j]| (i, j)).unzip();
+        let c = vec![1.0; e.len()];
+        let mut g = Graph::<f64>::with_capacity(h * w, e.len());
+        g.add_edges(&s, &d, &c, &c).unwrap();
+        g.add_tweights(0, 1.0, 0.0).unwrap();
+        g.add_tweights(h * w - 1, 0.0, 1.0).unwrap();
+        assert_eq!(g.maxflow(), 1.0);
+        let per_node = g.memory_bytes() as f64 / (h * w) as f64;
+        assert!(per_node <= 92.0, "{per_node} bytes per node");
     }
 
     #[test]

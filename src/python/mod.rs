@@ -9,6 +9,7 @@ mod arrays;
 mod body;
 mod camera;
 mod cloud;
+mod graphcut;
 mod io;
 
 use crate::error::Error;
@@ -63,6 +64,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     camera::register(m)?;
     body::register(m)?;
     cloud::register(m)?;
+    graphcut::register(m)?;
     io::register(m)?;
     Ok(())
 }
