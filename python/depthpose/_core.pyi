@@ -135,3 +135,81 @@ class BodyModel:
         self, pose: npt.NDArray[np.float64]
     ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
+
+# ---- fit (src/python/fit.rs) --------------------------------------------------------
+class FitConfig:
+    sigma: float
+    loss: str
+    loss_scale: float
+    potts: float
+    contrast_weight: float
+    contrast_sigma: float
+    outlier_distance: float
+    outlier_distance_start: float
+    anneal_iterations: int
+    truncation_factor: float
+    max_iterations: int
+    label_change_tolerance: float
+    energy_tolerance: float
+    expansion_cycles: int
+    lm_max_iterations: int
+    connectivity: int
+    def __init__(
+        self,
+        *,
+        sigma: float | None = None,
+        loss: str = "squared",
+        loss_scale: float = 0.03,
+        potts: float | None = None,
+        contrast_weight: float | None = None,
+        contrast_sigma: float | None = None,
+        outlier_distance: float | None = None,
+        outlier_distance_start: float | None = None,
+        anneal_iterations: int | None = None,
+        truncation_factor: float | None = None,
+        max_iterations: int | None = None,
+        label_change_tolerance: float | None = None,
+        energy_tolerance: float | None = None,
+        expansion_cycles: int | None = None,
+        lm_max_iterations: int | None = None,
+        connectivity: int = 4,
+    ) -> None: ...
+
+class FitResult:
+    @property
+    def pose(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def joints(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def labels(self) -> npt.NDArray[np.int16]: ...
+    @property
+    def energy(self) -> float: ...
+    @property
+    def energy_trace(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def reason(self) -> str: ...
+    @property
+    def part_counts(self) -> dict[str, int]: ...
+    @property
+    def outliers(self) -> int: ...
+
+def fit_pose(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    init_pose: npt.NDArray[np.float64],
+    *,
+    model: BodyModel | None = None,
+    mask: npt.NDArray[np.bool_] | None = None,
+    config: FitConfig | None = None,
+    prior: npt.NDArray[np.float64] | None = None,
+    prior_weight: float = 100.0,
+) -> FitResult: ...
+def pose_from_joints(
+    joints: npt.NDArray[np.float64],
+    model: BodyModel | None = None,
+    init: npt.NDArray[np.float64] | None = None,
+) -> npt.NDArray[np.float64]: ...

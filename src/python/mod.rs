@@ -9,6 +9,7 @@ mod arrays;
 mod body;
 mod camera;
 mod cloud;
+mod fit;
 mod graphcut;
 mod io;
 
@@ -64,6 +65,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     camera::register(m)?;
     body::register(m)?;
     cloud::register(m)?;
+    fit::register(m)?;
     graphcut::register(m)?;
     io::register(m)?;
     Ok(())
