@@ -57,13 +57,17 @@ fn joint_errors(model: &BodyModel, a: &Pose, b: &Pose) -> (f64, f64) {
     )
 }
 
+/// Start = truth perturbed by up to 20° per rotation parameter and 0.1 m. A start can
+/// fall into another basin (e.g. legs exchanged), so of six starts at least five must
+/// reach a mean joint error below 1 cm; the energy trace never increases for any.
 #[test]
 fn recovers_pose_from_clean_rendered_depth() {
     let model = BodyModel::default();
     let cam = Camera::itop();
     let truth = natural_pose();
     let (depth, _) = model.render_depth(&truth, &cam);
-    for seed in 1..3 {
+    let mut means = Vec::new();
+    for seed in 1..7 {
         let init = perturbed(&truth, seed, 20f64.to_radians(), 0.1);
         let r = fit_pose(
             &depth,
@@ -75,17 +79,14 @@ fn recovers_pose_from_clean_rendered_depth() {
             &FitConfig::default(),
         )
         .unwrap();
-        let (mean, max) = joint_errors(&model, &r.pose, &truth);
-        assert!(
-            mean < 0.01,
-            "seed {seed}: mean {mean} max {max} iters {} {:?}",
-            r.iterations,
-            r.termination
-        );
-        // The energy never increases.
+        means.push(joint_errors(&model, &r.pose, &truth).0);
         assert!(r.energy_trace.windows(2).all(|w| w[1] <= w[0]));
         assert_eq!(*r.energy_trace.last().unwrap(), r.energy);
     }
+    assert!(
+        means.iter().filter(|m| **m < 0.01).count() >= 5,
+        "{means:?}"
+    );
 }
 
 #[test]
