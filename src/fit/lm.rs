@@ -406,6 +406,7 @@ impl LevenbergMarquardt {
 }
 
 #[cfg(test)]
+#[allow(clippy::needless_range_loop)] // parallel arrays indexed together
 mod tests {
     use super::*;
 
