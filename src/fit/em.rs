@@ -89,7 +89,9 @@ impl Default for EmConfig {
             energy_tolerance: 1e-4,
             expansion_cycles: 3,
             lm: LmConfig {
-                max_iterations: 8,
+                // The EM loop re-linearises after every E-step anyway; a few LM
+                // iterations per M-step fit the shared sequences better and faster.
+                max_iterations: 3,
                 cost_tolerance: 1e-5,
                 ..LmConfig::default()
             },
