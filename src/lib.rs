@@ -5,11 +5,15 @@
 //! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
 //! [`python`] behind the `python` feature; algorithms never live there.
 
+pub mod body;
 pub mod camera;
 pub mod cloud;
 pub mod error;
+pub mod fit;
+pub mod graphcut;
 pub mod io;
 pub mod stereo;
+pub mod render;
 
 #[cfg(feature = "python")]
 mod python;

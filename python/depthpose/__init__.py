@@ -20,21 +20,26 @@ from ._core import (
     surface_normals,
 )
 from .cloud import PointCloud, foreground_mask, point_cloud
+from .fit import FitConfig, FitResult, fit_pose, pose_from_joints
 from .io import read_depth, read_image, write_depth
 
 __all__ = [
     "Camera",
     "DepthPoseError",
     "FileFormatError",
+    "FitConfig",
+    "FitResult",
     "InvalidInputError",
     "NoBodyError",
     "PointCloud",
     "__version__",
     "depth_to_points",
+    "fit_pose",
     "foreground_mask",
     "io",
     "pixel_graph",
     "point_cloud",
+    "pose_from_joints",
     "read_depth",
     "read_image",
     "surface_normals",

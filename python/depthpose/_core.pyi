@@ -1,5 +1,6 @@
 # Type stubs for the native module depthpose._core (checked by tests/test_stub.py).
 from os import PathLike
+from typing import List, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -85,3 +86,130 @@ def write_depth_png(
     path: str | PathLike[str], depth: npt.NDArray[np.generic], scale: float = 0.001
 ) -> None: ...
 def write_rgb_png(path: str | PathLike[str], rgb: npt.NDArray[np.uint8]) -> None: ...
+
+class BodyModel:
+    def __init__(self, height: float = 1.75) -> None: ...
+    @property
+    def param_names(self) -> List[str]: ...
+    @property
+    def joint_names(self) -> List[str]: ...
+    @property
+    def part_names(self) -> List[str]: ...
+    @property
+    def shape_names(self) -> List[str]: ...
+    @property
+    def lower_bounds(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def upper_bounds(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def shape(self) -> npt.NDArray[np.float64]: ...
+    @shape.setter
+    def shape(self, value: npt.ArrayLike) -> None: ...
+    def shape_dict(self) -> List[Tuple[str, float]]: ...
+    @staticmethod
+    def neutral_pose() -> npt.NDArray[np.float64]: ...
+    def clamp_pose(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    @staticmethod
+    def pose_with_root_increment(
+        pose: npt.NDArray[np.float64], omega: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.float64]: ...
+    def segment_transforms(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def joints(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def joints_jacobian(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
+    def distances(
+        self, points: npt.NDArray[np.floating], pose: npt.NDArray[np.float64]
+    ) -> npt.NDArray[np.float32]: ...
+    def residuals_and_jacobian(
+        self,
+        points: npt.NDArray[np.floating],
+        labels: npt.NDArray[np.integer],
+        pose: npt.NDArray[np.float64],
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    def render_depth(
+        self, pose: npt.NDArray[np.float64], camera: "Camera"
+    ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.int16]]: ...
+    def superquadric_meshes(
+        self, pose: npt.NDArray[np.float64], rings: int = 20, sectors: int = 24
+    ) -> List[Tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]]: ...
+    def ellipsoids(
+        self, pose: npt.NDArray[np.float64]
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+
+
+# ---- fit (src/python/fit.rs) --------------------------------------------------------
+class FitConfig:
+    sigma: float
+    loss: str
+    loss_scale: float
+    potts: float
+    contrast_weight: float
+    contrast_sigma: float
+    outlier_distance: float
+    outlier_distance_start: float
+    anneal_iterations: int
+    truncation_factor: float
+    max_iterations: int
+    label_change_tolerance: float
+    energy_tolerance: float
+    expansion_cycles: int
+    lm_max_iterations: int
+    connectivity: int
+    def __init__(
+        self,
+        *,
+        sigma: float | None = None,
+        loss: str = "squared",
+        loss_scale: float = 0.03,
+        potts: float | None = None,
+        contrast_weight: float | None = None,
+        contrast_sigma: float | None = None,
+        outlier_distance: float | None = None,
+        outlier_distance_start: float | None = None,
+        anneal_iterations: int | None = None,
+        truncation_factor: float | None = None,
+        max_iterations: int | None = None,
+        label_change_tolerance: float | None = None,
+        energy_tolerance: float | None = None,
+        expansion_cycles: int | None = None,
+        lm_max_iterations: int | None = None,
+        connectivity: int = 4,
+    ) -> None: ...
+
+class FitResult:
+    @property
+    def pose(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def joints(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def labels(self) -> npt.NDArray[np.int16]: ...
+    @property
+    def energy(self) -> float: ...
+    @property
+    def energy_trace(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def reason(self) -> str: ...
+    @property
+    def part_counts(self) -> dict[str, int]: ...
+    @property
+    def outliers(self) -> int: ...
+
+def fit_pose(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    init_pose: npt.NDArray[np.float64],
+    *,
+    model: BodyModel | None = None,
+    mask: npt.NDArray[np.bool_] | None = None,
+    config: FitConfig | None = None,
+    prior: npt.NDArray[np.float64] | None = None,
+    prior_weight: float = 100.0,
+) -> FitResult: ...
+def pose_from_joints(
+    joints: npt.NDArray[np.float64],
+    model: BodyModel | None = None,
+    init: npt.NDArray[np.float64] | None = None,
+) -> npt.NDArray[np.float64]: ...

@@ -6,8 +6,11 @@
 //! `py.detach` around the real work and returns owned arrays. One file per stage.
 
 mod arrays;
+mod body;
 mod camera;
 mod cloud;
+mod fit;
+mod graphcut;
 mod io;
 mod stereo;
 
@@ -61,7 +64,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("NoBodyError", py.get_type::<NoBodyError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     camera::register(m)?;
+    body::register(m)?;
     cloud::register(m)?;
+    fit::register(m)?;
+    graphcut::register(m)?;
     io::register(m)?;
     stereo::register(m)?;
     Ok(())

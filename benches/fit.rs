@@ -1,0 +1,104 @@
+//! Fit benchmarks: one hard-EM frame at 320×240 and one LM iteration on 10,000 points.
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use depthpose::body::{param, BodyModel, Pose};
+use depthpose::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
+use depthpose::fit::em::{hard_em, unary_costs, EmConfig, NUM_LABELS};
+use depthpose::fit::lm::{PoseObjective, N, NN};
+use depthpose::fit::objective::{Loss, PointCost, PointObjective};
+use depthpose::graphcut::{CrfProblem, CrfSolver, MoveConfig};
+use depthpose::Camera;
+use std::hint::black_box;
+
+fn pose() -> Pose {
+    let mut p = BodyModel::neutral_pose();
+    p[2] = 2.3;
+    p[param::ROOT_R + 1] = 0.3;
+    p[param::R_SHOULDER] = 0.4;
+    p[param::R_SHOULDER + 1] = 0.5;
+    p[param::R_ELBOW] = 0.9;
+    p[param::L_SHOULDER + 1] = 0.3;
+    p[param::R_HIP] = 0.3;
+    p[param::R_KNEE] = 0.4;
+    p
+}
+
+fn bench(c: &mut Criterion) {
+    let model = BodyModel::default();
+    let cam = Camera::itop();
+    let truth = pose();
+    let (depth, _) = model.render_depth(&truth, &cam);
+    let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+    let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
+    let graph = neighbour_graph(&cloud, Connectivity::Four);
+    eprintln!("points {} edges {}", cloud.len(), graph.len());
+    let mut init = truth;
+    for (i, v) in init.iter_mut().enumerate().skip(6) {
+        *v += if i % 2 == 0 { 0.15 } else { -0.15 };
+    }
+    init = BodyModel::clamp_pose(&init);
+    let cfg = EmConfig::default();
+    let r = hard_em(&model, &cloud.points, &graph, &init, None, &cfg).unwrap();
+    eprintln!("EM iterations {} ({:?})", r.iterations, r.termination);
+
+    let mut g = c.benchmark_group("fit");
+    g.bench_function("em_frame_320x240", |b| {
+        b.iter(|| hard_em(&model, &cloud.points, &graph, black_box(&init), None, &cfg).unwrap())
+    });
+    // Parts of one EM iteration.
+    let mut unary = vec![0.0; cloud.len() * NUM_LABELS];
+    g.bench_function("unary_costs", |b| {
+        b.iter(|| {
+            unary_costs(
+                &model,
+                &cloud.points,
+                black_box(&truth),
+                &cfg,
+                0.1,
+                &mut unary,
+            )
+        })
+    });
+    let weights = vec![0.5; graph.len()];
+    let mut solver = CrfSolver::<f64>::new(cloud.len(), &graph.edges).unwrap();
+    let labels0: Vec<i32> = r
+        .labels
+        .iter()
+        .map(|&l| if l < 0 { 16 } else { l })
+        .collect();
+    g.bench_function("e_step_expansion_warm", |b| {
+        b.iter(|| {
+            let p = CrfProblem {
+                unary: &unary,
+                n_labels: NUM_LABELS,
+                edges: &graph.edges,
+                weights: &weights,
+                pairwise: None,
+            };
+            solver
+                .alpha_expansion(&p, Some(&labels0), &MoveConfig { max_cycles: 3 })
+                .unwrap()
+        })
+    });
+    // One LM iteration = one normal system + one cost evaluation, on 10,000 points.
+    let n = 10_000;
+    let pts: Vec<[f32; 3]> = (0..n).map(|i| cloud.points[i % cloud.len()]).collect();
+    let labs: Vec<i32> = (0..n).map(|i| labels0[i % cloud.len()].min(15)).collect();
+    let pc = PointCost {
+        sigma: 0.02,
+        loss: Loss::Squared,
+        truncation: 0.2,
+    };
+    let mut obj = PointObjective::new(&model, &pts, &labs, pc);
+    let (mut h, mut gr) = (Box::new([0.0; NN]), Box::new([0.0; N]));
+    g.bench_function("lm_iteration_10k", |b| {
+        b.iter(|| {
+            obj.normal_equations(black_box(&truth), &mut h, &mut gr);
+            obj.cost(black_box(&truth))
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);

@@ -1,0 +1,451 @@
+//! Hard EM: CRF body-part labelling (E-step) alternating with Levenberg–Marquardt on the
+//! labelled points (M-step).
+//!
+//! Energy (paper eqs. 6–9), over points i with labels V_i ∈ {0..15 segments, outlier}:
+//!
+//! E(Θ, V) = Σ_i U_i(V_i) + Σ_{(i,j) ∈ graph} w_ij · [V_i ≠ V_j]
+//!
+//! - U_i(k) = ρ(min(|d_ik|, T))/σ² with d_ik the signed distance of point i to the
+//!   ellipsoid of segment k at pose Θ (ρ(r) = r²/2 by default: eq. 6), truncated at
+//!   T = `truncation_factor`·τ; U_i(outlier) = ρ(τ)/σ², a constant, so leftover
+//!   background, flying pixels and noise farther than τ from every part cost no more
+//!   than that and do not drag the fit.
+//! - w_ij = K + c·exp(−g_ij²/2σ_c²)·(d̄/d_ij) (generalised Potts, eq. 8, plus the
+//!   depth-contrast term, eq. 9): g = depth difference, d_ij = 3-D edge length, d̄ the
+//!   mean edge length of the frame (makes the ratio unitless). Cutting the labelling
+//!   where the depth jumps is cheap; across a smooth surface it costs K + c.
+//!
+//! The E-step minimises over V by alpha-expansion (Potts is a metric) from the current
+//! labels, so it never increases E. The M-step minimises E1 over Θ for fixed labels by
+//! LM with the same truncated loss, so it never increases E either (E2 does not depend on
+//! Θ). The outlier distance τ starts wide and shrinks geometrically to its final value
+//! (a fixed tight cut-off strands limbs that start far away); a smaller τ lowers every
+//! unary term, so the energy trace stays non-increasing across the schedule too. The
+//! full energy is evaluated after every step and a step that would raise it is undone.
+
+use super::lm::{LevenbergMarquardt, LmConfig, PosePrior, WithPrior};
+use super::objective::{Loss, PointCost, PointObjective, CHUNK_POINTS};
+use crate::body::{BodyModel, Kinematics, Pose, NUM_SEGMENTS};
+use crate::cloud::PixelGraph;
+use crate::error::{ensure, Error, Result};
+use crate::graphcut::{CrfProblem, CrfSolver, MoveConfig};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+/// Label of the outlier class inside the CRF (exported as −1).
+pub const OUTLIER: i32 = NUM_SEGMENTS as i32;
+/// CRF labels: the segments plus the outlier.
+pub const NUM_LABELS: usize = NUM_SEGMENTS + 1;
+/// Edge lengths below this (m) are treated as this (coincident points).
+const MIN_EDGE_LENGTH: f64 = 1e-4;
+
+/// Settings of [`hard_em`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EmConfig {
+    /// Residual scale σ (m) of the unary term.
+    pub sigma: f64,
+    /// Loss of the point residuals.
+    pub loss: Loss,
+    /// Generalised Potts weight K (eq. 8).
+    pub potts: f64,
+    /// Weight c of the depth-contrast term (eq. 9).
+    pub contrast_weight: f64,
+    /// Depth-difference scale σ_c (m) of the contrast term.
+    pub contrast_sigma: f64,
+    /// Final outlier distance τ (m).
+    pub outlier_distance: f64,
+    /// Outlier distance at the first iteration (≥ `outlier_distance`).
+    pub outlier_distance_start: f64,
+    /// τ reaches its final value after this many iterations.
+    pub anneal_iterations: usize,
+    /// Residuals beyond this multiple of τ are truncated (≥ 1).
+    pub truncation_factor: f64,
+    /// At most this many E/M iterations.
+    pub max_iterations: usize,
+    /// Converged when at most this fraction of the labels changed ...
+    pub label_change_tolerance: f64,
+    /// ... and the energy dropped by at most this fraction in the last iteration.
+    pub energy_tolerance: f64,
+    /// Alpha-expansion cycles per E-step.
+    pub expansion_cycles: usize,
+    /// The M-step's LM settings.
+    pub lm: LmConfig,
+}
+
+impl Default for EmConfig {
+    fn default() -> Self {
+        EmConfig {
+            sigma: 0.02,
+            loss: Loss::Squared,
+            potts: 0.3,
+            contrast_weight: 1.0,
+            contrast_sigma: 0.02,
+            outlier_distance: 0.1,
+            outlier_distance_start: 0.2,
+            anneal_iterations: 6,
+            truncation_factor: 2.0,
+            max_iterations: 20,
+            label_change_tolerance: 0.002,
+            energy_tolerance: 1e-4,
+            expansion_cycles: 3,
+            lm: LmConfig {
+                // The EM loop re-linearises after every E-step anyway; a few LM
+                // iterations per M-step fit the shared sequences better and faster.
+                max_iterations: 3,
+                cost_tolerance: 1e-5,
+                ..LmConfig::default()
+            },
+        }
+    }
+}
+
+impl EmConfig {
+    /// Checks every field, naming the bad one.
+    pub fn validate(&self) -> Result<()> {
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        let nonneg = |v: f64| v.is_finite() && v >= 0.0;
+        ensure(pos(self.sigma), "sigma", || {
+            format!("must be finite and > 0, got {}", self.sigma)
+        })?;
+        match self.loss {
+            Loss::Squared => {}
+            Loss::Huber(d) | Loss::Cauchy(d) => ensure(pos(d), "loss", || {
+                format!("robust loss scale must be finite and > 0, got {d}")
+            })?,
+        }
+        ensure(nonneg(self.potts), "potts", || {
+            format!("must be finite and >= 0, got {}", self.potts)
+        })?;
+        ensure(nonneg(self.contrast_weight), "contrast_weight", || {
+            format!("must be finite and >= 0, got {}", self.contrast_weight)
+        })?;
+        ensure(pos(self.contrast_sigma), "contrast_sigma", || {
+            format!("must be finite and > 0, got {}", self.contrast_sigma)
+        })?;
+        ensure(pos(self.outlier_distance), "outlier_distance", || {
+            format!("must be finite and > 0, got {}", self.outlier_distance)
+        })?;
+        ensure(
+            self.outlier_distance_start.is_finite()
+                && self.outlier_distance_start >= self.outlier_distance,
+            "outlier_distance_start",
+            || {
+                format!(
+                    "must be finite and >= outlier_distance ({}), got {}",
+                    self.outlier_distance, self.outlier_distance_start
+                )
+            },
+        )?;
+        ensure(
+            self.truncation_factor.is_finite() && self.truncation_factor >= 1.0,
+            "truncation_factor",
+            || format!("must be >= 1, got {}", self.truncation_factor),
+        )?;
+        ensure(self.max_iterations > 0, "max_iterations", || {
+            "must be at least 1".to_string()
+        })?;
+        ensure(
+            (0.0..=1.0).contains(&self.label_change_tolerance),
+            "label_change_tolerance",
+            || format!("must be within 0..1, got {}", self.label_change_tolerance),
+        )?;
+        ensure(nonneg(self.energy_tolerance), "energy_tolerance", || {
+            format!("must be finite and >= 0, got {}", self.energy_tolerance)
+        })?;
+        ensure(self.expansion_cycles > 0, "expansion_cycles", || {
+            "must be at least 1".to_string()
+        })?;
+        self.lm.validate()
+    }
+
+    /// τ at iteration `it` (0-based): geometric from the start value to the final one.
+    pub fn outlier_distance_at(&self, it: usize) -> f64 {
+        if self.anneal_iterations == 0 || it >= self.anneal_iterations {
+            return self.outlier_distance;
+        }
+        let t = it as f64 / self.anneal_iterations as f64;
+        self.outlier_distance_start.powf(1.0 - t) * self.outlier_distance.powf(t)
+    }
+
+    fn point_cost(&self, tau: f64) -> PointCost {
+        PointCost {
+            sigma: self.sigma,
+            loss: self.loss,
+            truncation: self.truncation_factor * tau,
+        }
+    }
+
+    fn outlier_cost(&self, tau: f64) -> f64 {
+        self.loss.rho(tau) / (self.sigma * self.sigma)
+    }
+}
+
+/// Why the EM loop stopped.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum EmTermination {
+    /// Labels and energy settled.
+    Converged,
+    /// An iteration changed neither labels nor pose.
+    Stationary,
+    /// `max_iterations` reached.
+    MaxIterations,
+}
+
+impl EmTermination {
+    pub fn name(self) -> &'static str {
+        match self {
+            EmTermination::Converged => "converged",
+            EmTermination::Stationary => "stationary",
+            EmTermination::MaxIterations => "max_iterations",
+        }
+    }
+}
+
+/// Outcome of [`hard_em`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct EmResult {
+    pub pose: Pose,
+    /// Per point: segment 0..15 or −1 (outlier).
+    pub labels: Vec<i32>,
+    /// Final energy.
+    pub energy: f64,
+    /// Energy after the initial E-step and after every M- and E-step (non-increasing).
+    pub energy_trace: Vec<f64>,
+    pub iterations: usize,
+    pub termination: EmTermination,
+    /// Points per segment.
+    pub part_counts: [usize; NUM_SEGMENTS],
+    /// Points labelled outlier.
+    pub outliers: usize,
+}
+
+/// The CRF weight of each graph edge (see the module docs).
+pub fn edge_weights(graph: &PixelGraph, config: &EmConfig, out: &mut Vec<f64>) {
+    out.clear();
+    let n = graph.len().max(1) as f64;
+    let mean = graph
+        .distance
+        .iter()
+        .map(|&d| (d as f64).max(MIN_EDGE_LENGTH))
+        .sum::<f64>()
+        / n;
+    let s2 = 2.0 * config.contrast_sigma * config.contrast_sigma;
+    out.extend(
+        graph
+            .distance
+            .iter()
+            .zip(&graph.depth_diff)
+            .map(|(&d, &g)| {
+                let g = g as f64;
+                config.potts
+                    + config.contrast_weight * (-g * g / s2).exp() * mean
+                        / (d as f64).max(MIN_EDGE_LENGTH)
+            }),
+    );
+}
+
+/// Fills `unary` (N × [`NUM_LABELS`]) for `pose` and outlier distance `tau`.
+pub fn unary_costs(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    pose: &Pose,
+    config: &EmConfig,
+    tau: f64,
+    unary: &mut [f64],
+) {
+    let kin = Kinematics::new(model, pose);
+    let placed = model.placed_ellipsoids(&kin);
+    let pc = config.point_cost(tau);
+    let cap = pc.cap();
+    let outlier = config.outlier_cost(tau);
+    let reach: [f64; NUM_SEGMENTS] = std::array::from_fn(|k| placed[k].prepared.radii().max());
+    unary
+        .par_chunks_mut(CHUNK_POINTS * NUM_LABELS)
+        .zip(points.par_chunks(CHUNK_POINTS))
+        .for_each(|(u, pts)| {
+            for (row, p) in u.chunks_exact_mut(NUM_LABELS).zip(pts) {
+                let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                for k in 0..NUM_SEGMENTS {
+                    // |p − c| − r_max bounds the distance from below: beyond the
+                    // truncation the cost is the cap without a distance query.
+                    let lower = (p - placed[k].centre).norm() - reach[k];
+                    row[k] = if lower >= pc.truncation {
+                        cap
+                    } else {
+                        pc.cost(placed[k].signed_distance(&p))
+                    };
+                }
+                row[NUM_SEGMENTS] = outlier;
+            }
+        });
+}
+
+fn problem<'a>(unary: &'a [f64], edges: &'a [[u32; 2]], weights: &'a [f64]) -> CrfProblem<'a, f64> {
+    CrfProblem {
+        unary,
+        n_labels: NUM_LABELS,
+        edges,
+        weights,
+        pairwise: None,
+    }
+}
+
+/// E(V) for fixed unary terms and edge weights.
+pub fn crf_energy(unary: &[f64], edges: &[[u32; 2]], weights: &[f64], labels: &[i32]) -> f64 {
+    let u: f64 = labels
+        .iter()
+        .enumerate()
+        .map(|(i, &l)| unary[i * NUM_LABELS + l as usize])
+        .sum();
+    let p: f64 = edges
+        .iter()
+        .zip(weights)
+        .filter(|(e, _)| labels[e[0] as usize] != labels[e[1] as usize])
+        .map(|(_, w)| w)
+        .sum();
+    u + p
+}
+
+/// Runs hard EM on `points` (with their neighbourhood `graph`) from `init`. `prior`, if
+/// given, adds ½Σ w(θ − θ_prior)² to the M-step (and to the energy).
+pub fn hard_em(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    graph: &PixelGraph,
+    init: &Pose,
+    prior: Option<&PosePrior>,
+    config: &EmConfig,
+) -> Result<EmResult> {
+    config.validate()?;
+    let n = points.len();
+    if n == 0 {
+        return Err(Error::NoBody("no foreground points to fit".into()));
+    }
+    if let Some(i) = init.iter().position(|v| !v.is_finite()) {
+        return Err(Error::invalid(
+            "init_pose",
+            format!("parameter {i} is not finite"),
+        ));
+    }
+    let mut weights = Vec::with_capacity(graph.len());
+    edge_weights(graph, config, &mut weights);
+    let mut solver = CrfSolver::<f64>::new(n, &graph.edges)?;
+    let mut lm = LevenbergMarquardt::new(config.lm)?;
+    let moves = MoveConfig {
+        max_cycles: config.expansion_cycles,
+    };
+    let mut unary = vec![0.0; n * NUM_LABELS];
+    let prior_cost = |p: &Pose| prior.map_or(0.0, |pr| pr.cost(p));
+
+    let mut pose = BodyModel::clamp_pose(init);
+    let mut tau = config.outlier_distance_at(0);
+    unary_costs(model, points, &pose, config, tau, &mut unary);
+    // Initial labels: the cheapest label of each point, then the CRF.
+    let mut labels: Vec<i32> = unary
+        .chunks_exact(NUM_LABELS)
+        .map(|row| {
+            (0..NUM_LABELS)
+                .min_by(|&a, &b| row[a].total_cmp(&row[b]))
+                .unwrap_or(0) as i32
+        })
+        .collect();
+    let lab = solver.alpha_expansion(
+        &problem(&unary, &graph.edges, &weights),
+        Some(&labels),
+        &moves,
+    )?;
+    labels = lab.labels;
+    let mut energy = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&pose);
+    let mut trace = vec![energy];
+    let mut termination = EmTermination::MaxIterations;
+    let mut iterations = 0;
+    while iterations < config.max_iterations {
+        iterations += 1;
+        let energy_at_start = energy;
+        // M-step.
+        let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
+        let mut new_pose = pose;
+        let report = {
+            let mut with_prior = WithPrior {
+                objective: &mut objective,
+                prior,
+            };
+            lm.minimize(&mut with_prior, &mut new_pose)
+        };
+        let pose_moved = report.accepted > 0;
+        if pose_moved {
+            unary_costs(model, points, &new_pose, config, tau, &mut unary);
+            let e = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&new_pose);
+            if e <= energy {
+                pose = new_pose;
+                energy = e;
+            } else {
+                // Cannot happen in exact arithmetic; keep the better state.
+                unary_costs(model, points, &pose, config, tau, &mut unary);
+            }
+            trace.push(energy);
+        }
+        // Anneal τ: every unary term can only drop.
+        let next_tau = config.outlier_distance_at(iterations);
+        if next_tau != tau {
+            tau = next_tau;
+            unary_costs(model, points, &pose, config, tau, &mut unary);
+            energy = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&pose);
+        }
+        // E-step.
+        let lab = solver.alpha_expansion(
+            &problem(&unary, &graph.edges, &weights),
+            Some(&labels),
+            &moves,
+        )?;
+        let changed = lab
+            .labels
+            .iter()
+            .zip(&labels)
+            .filter(|(a, b)| a != b)
+            .count();
+        let e = crf_energy(&unary, &graph.edges, &weights, &lab.labels) + prior_cost(&pose);
+        if e <= energy {
+            labels = lab.labels;
+            energy = e;
+        }
+        trace.push(energy);
+        let annealed = iterations >= config.anneal_iterations;
+        if changed == 0 && !pose_moved {
+            termination = EmTermination::Stationary;
+            break;
+        }
+        let drop = energy_at_start - energy;
+        if annealed
+            && (changed as f64) <= config.label_change_tolerance * n as f64
+            && drop <= config.energy_tolerance * energy.abs()
+        {
+            termination = EmTermination::Converged;
+            break;
+        }
+    }
+    let mut part_counts = [0usize; NUM_SEGMENTS];
+    let mut outliers = 0;
+    let labels: Vec<i32> = labels
+        .into_iter()
+        .map(|l| {
+            if l == OUTLIER {
+                outliers += 1;
+                -1
+            } else {
+                part_counts[l as usize] += 1;
+                l
+            }
+        })
+        .collect();
+    Ok(EmResult {
+        pose,
+        labels,
+        energy,
+        energy_trace: trace,
+        iterations,
+        termination,
+        part_counts,
+        outliers,
+    })
+}

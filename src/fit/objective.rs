@@ -1,0 +1,361 @@
+//! The data term of the M-step: labelled points against their segment ellipsoids.
+//!
+//! For a point p with label k the residual is its signed distance r to ellipsoid k and
+//! its cost is ρ(r)/σ², where ρ is the (optionally robust) loss, truncated to the
+//! constant ρ(T) beyond |r| > T (the truncation matches the E-step's unary, so the
+//! M-step minimises exactly the E1 part of the EM energy). The Gauss–Newton system uses
+//! IRLS weights w = ρ'(r)/r. Accumulation runs over fixed chunks of points in parallel,
+//! each chunk into its own preallocated accumulator, summed afterwards in chunk order,
+//! so the result is deterministic and no allocation happens per call once the buffers
+//! have grown to the cloud size.
+
+use super::lm::{PoseObjective, N, NN};
+use crate::body::ellipsoid::PlacedEllipsoid;
+use crate::body::kinematics::SEGMENT_DOFS;
+use crate::body::{BodyModel, Kinematics, Pose, NUM_SEGMENTS};
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+/// Points per parallel chunk.
+pub const CHUNK_POINTS: usize = 512;
+/// At most this many parameters move one segment (root 6 + shoulder 3 + elbow 1).
+const MAX_SEGMENT_DOFS: usize = 10;
+
+/// Robust loss of the residuals.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Loss {
+    /// ρ(r) = r²/2.
+    Squared,
+    /// Quadratic up to `delta` (m), linear beyond.
+    Huber(f64),
+    /// ρ(r) = δ²/2 · ln(1 + r²/δ²).
+    Cauchy(f64),
+}
+
+impl Loss {
+    /// ρ(r).
+    #[inline]
+    pub fn rho(self, r: f64) -> f64 {
+        match self {
+            Loss::Squared => 0.5 * r * r,
+            Loss::Huber(d) => {
+                let a = r.abs();
+                if a <= d {
+                    0.5 * r * r
+                } else {
+                    d * (a - 0.5 * d)
+                }
+            }
+            Loss::Cauchy(d) => 0.5 * d * d * (r * r / (d * d)).ln_1p(),
+        }
+    }
+
+    /// IRLS weight ρ'(r)/r.
+    #[inline]
+    pub fn weight(self, r: f64) -> f64 {
+        match self {
+            Loss::Squared => 1.0,
+            Loss::Huber(d) => {
+                let a = r.abs();
+                if a <= d {
+                    1.0
+                } else {
+                    d / a
+                }
+            }
+            Loss::Cauchy(d) => 1.0 / (1.0 + r * r / (d * d)),
+        }
+    }
+}
+
+/// Per-point cost settings shared by the E-step unary and the M-step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointCost {
+    /// Residual scale σ (m): cost = ρ(r)/σ².
+    pub sigma: f64,
+    pub loss: Loss,
+    /// Residuals beyond this (m) cost the constant ρ(T)/σ².
+    pub truncation: f64,
+}
+
+impl PointCost {
+    /// Cost of residual `r`.
+    #[inline]
+    pub fn cost(&self, r: f64) -> f64 {
+        self.loss.rho(r.abs().min(self.truncation)) / (self.sigma * self.sigma)
+    }
+
+    /// The constant cost of a truncated residual.
+    #[inline]
+    pub fn cap(&self) -> f64 {
+        self.loss.rho(self.truncation) / (self.sigma * self.sigma)
+    }
+
+    /// (cost, IRLS weight / σ²) of residual `r`; the weight is 0 beyond the truncation.
+    #[inline]
+    fn cost_and_weight(&self, r: f64) -> (f64, f64) {
+        let s2 = self.sigma * self.sigma;
+        if r.abs() > self.truncation {
+            (self.cap(), 0.0)
+        } else {
+            (self.loss.rho(r) / s2, self.loss.weight(r) / s2)
+        }
+    }
+}
+
+/// One chunk's share of the normal equations.
+#[derive(Clone)]
+struct Accumulator {
+    h: [f64; NN],
+    g: [f64; N],
+    cost: f64,
+}
+
+impl Default for Accumulator {
+    fn default() -> Self {
+        Accumulator {
+            h: [0.0; NN],
+            g: [0.0; N],
+            cost: 0.0,
+        }
+    }
+}
+
+/// Σ over labelled points of ρ(r)/σ², r = signed distance to the label's ellipsoid.
+/// Labels outside 0..[`NUM_SEGMENTS`] (outliers, background) are skipped.
+pub struct PointObjective<'a> {
+    pub model: &'a BodyModel,
+    pub points: &'a [[f32; 3]],
+    pub labels: &'a [i32],
+    pub point_cost: PointCost,
+    chunks: Vec<Accumulator>,
+    partial_costs: Vec<f64>,
+}
+
+impl<'a> PointObjective<'a> {
+    /// `points` and `labels` must have the same length (checked by the callers that
+    /// take user input).
+    pub fn new(
+        model: &'a BodyModel,
+        points: &'a [[f32; 3]],
+        labels: &'a [i32],
+        point_cost: PointCost,
+    ) -> Self {
+        debug_assert_eq!(points.len(), labels.len());
+        let n_chunks = points.len().div_ceil(CHUNK_POINTS);
+        PointObjective {
+            model,
+            points,
+            labels,
+            point_cost,
+            chunks: vec![Accumulator::default(); n_chunks],
+            partial_costs: vec![0.0; n_chunks],
+        }
+    }
+}
+
+#[inline]
+fn vec3(p: &[f32; 3]) -> Vector3<f64> {
+    Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
+}
+
+/// Σ cost over labelled points for the given placed ellipsoids (one chunk).
+fn chunk_cost(
+    placed: &[PlacedEllipsoid; NUM_SEGMENTS],
+    pc: &PointCost,
+    pts: &[[f32; 3]],
+    labs: &[i32],
+) -> f64 {
+    let mut c = 0.0;
+    for (p, &l) in pts.iter().zip(labs) {
+        if l >= 0 && (l as usize) < NUM_SEGMENTS {
+            c += pc.cost(placed[l as usize].signed_distance(&vec3(p)));
+        }
+    }
+    c
+}
+
+impl PoseObjective for PointObjective<'_> {
+    fn cost(&mut self, pose: &Pose) -> f64 {
+        let kin = Kinematics::new(self.model, pose);
+        let placed = self.model.placed_ellipsoids(&kin);
+        let pc = self.point_cost;
+        self.partial_costs
+            .par_iter_mut()
+            .zip(self.points.par_chunks(CHUNK_POINTS))
+            .zip(self.labels.par_chunks(CHUNK_POINTS))
+            .for_each(|((o, pts), labs)| *o = chunk_cost(&placed, &pc, pts, labs));
+        self.partial_costs.iter().sum()
+    }
+
+    fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
+        let kin = Kinematics::new(self.model, pose);
+        let placed = self.model.placed_ellipsoids(&kin);
+        let pc = self.point_cost;
+        // The parameters that move each segment, as index lists.
+        let dof_lists: [([usize; MAX_SEGMENT_DOFS], usize); NUM_SEGMENTS] =
+            std::array::from_fn(|k| {
+                let mut idx = [0usize; MAX_SEGMENT_DOFS];
+                let mut n = 0;
+                for (dof, slot) in (0..N).filter(|d| SEGMENT_DOFS[k] & (1 << d) != 0).zip(0..) {
+                    idx[slot] = dof;
+                    n += 1;
+                }
+                (idx, n)
+            });
+        self.chunks
+            .par_iter_mut()
+            .zip(self.points.par_chunks(CHUNK_POINTS))
+            .zip(self.labels.par_chunks(CHUNK_POINTS))
+            .for_each(|((acc, pts), labs)| {
+                acc.h.fill(0.0);
+                acc.g.fill(0.0);
+                acc.cost = 0.0;
+                for (p, &l) in pts.iter().zip(labs) {
+                    if l < 0 || l as usize >= NUM_SEGMENTS {
+                        continue;
+                    }
+                    let k = l as usize;
+                    let p = vec3(p);
+                    let q = placed[k].query(&p);
+                    let (c, w) = pc.cost_and_weight(q.distance);
+                    acc.cost += c;
+                    if w == 0.0 {
+                        continue;
+                    }
+                    let (idx, n) = &dof_lists[k];
+                    let mut jrow = [0.0; MAX_SEGMENT_DOFS];
+                    for a in 0..*n {
+                        // Moving the surface with velocity v changes the distance by −n·v.
+                        jrow[a] = -q.normal.dot(&kin.point_velocity(idx[a], &p));
+                    }
+                    let wr = w * q.distance;
+                    for a in 0..*n {
+                        let ia = idx[a];
+                        acc.g[ia] += jrow[a] * wr;
+                        let wj = w * jrow[a];
+                        for b in a..*n {
+                            acc.h[ia * N + idx[b]] += wj * jrow[b];
+                        }
+                    }
+                }
+            });
+        h.fill(0.0);
+        g.fill(0.0);
+        let mut cost = 0.0;
+        for acc in &self.chunks {
+            for (o, v) in h.iter_mut().zip(&acc.h) {
+                *o += v;
+            }
+            for (o, v) in g.iter_mut().zip(&acc.g) {
+                *o += v;
+            }
+            cost += acc.cost;
+        }
+        // Only the upper triangle (in dof order) was accumulated: mirror it.
+        for i in 0..N {
+            for j in 0..i {
+                h[i * N + j] = h[j * N + i];
+            }
+        }
+        cost
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::kinematics::tests::pose_for_tests;
+    use crate::body::pose_with_root_increment;
+
+    fn scattered(model: &BodyModel, pose: &Pose, n: usize) -> (Vec<[f32; 3]>, Vec<i32>) {
+        let joints = model.joints(pose);
+        let mut s = 12345u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64) / ((1u64 << 53) as f64) - 0.5
+        };
+        let pts: Vec<[f32; 3]> = (0..n)
+            .map(|i| {
+                let j = joints[i % 15];
+                [
+                    (j.x + 0.2 * next()) as f32,
+                    (j.y + 0.2 * next()) as f32,
+                    (j.z + 0.2 * next()) as f32,
+                ]
+            })
+            .collect();
+        let labels = (0..n)
+            .map(|i| if i % 7 == 6 { -1 } else { (i % 17) as i32 })
+            .collect();
+        (pts, labels)
+    }
+
+    /// The gradient g = JᵀWr matches finite differences of the cost for every loss.
+    #[test]
+    fn gradient_matches_finite_differences() {
+        let model = BodyModel::default();
+        let pose = pose_for_tests(4);
+        let (pts, labels) = scattered(&model, &pose, 1500);
+        for loss in [Loss::Squared, Loss::Huber(0.03), Loss::Cauchy(0.04)] {
+            let pc = PointCost {
+                sigma: 0.03,
+                loss,
+                truncation: 0.5,
+            };
+            let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+            let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+            let c = obj.normal_equations(&pose, &mut h, &mut g);
+            assert!((c - obj.cost(&pose)).abs() < 1e-9 * c.max(1.0));
+            let eps = 1e-6;
+            for dof in 0..N {
+                let (plus, minus) = if (3..6).contains(&dof) {
+                    let mut w = Vector3::zeros();
+                    w[dof - 3] = eps;
+                    (
+                        pose_with_root_increment(&pose, &w),
+                        pose_with_root_increment(&pose, &-w),
+                    )
+                } else {
+                    let (mut a, mut b) = (pose, pose);
+                    a[dof] += eps;
+                    b[dof] -= eps;
+                    (a, b)
+                };
+                let fd = (obj.cost(&plus) - obj.cost(&minus)) / (2.0 * eps);
+                assert!(
+                    (fd - g[dof]).abs() <= 1e-4 * fd.abs().max(g[dof].abs()).max(1.0),
+                    "{loss:?} dof {dof}: fd {fd} vs {}",
+                    g[dof]
+                );
+            }
+            // Symmetric and positive semi-definite diagonal.
+            for i in 0..N {
+                assert!(h[i * N + i] >= 0.0);
+                for j in 0..N {
+                    assert_eq!(h[i * N + j], h[j * N + i]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn truncated_points_add_a_constant() {
+        let model = BodyModel::default();
+        let pose = BodyModel::neutral_pose();
+        let pts = vec![[5.0f32, 5.0, 5.0]; 3];
+        let labels = vec![2, 5, -1];
+        let pc = PointCost {
+            sigma: 0.02,
+            loss: Loss::Squared,
+            truncation: 0.1,
+        };
+        let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+        let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+        let c = obj.normal_equations(&pose, &mut h, &mut g);
+        assert!((c - 2.0 * pc.cap()).abs() < 1e-12);
+        assert!(g.iter().all(|v| *v == 0.0) && h.iter().all(|v| *v == 0.0));
+    }
+}

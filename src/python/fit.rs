@@ -1,0 +1,338 @@
+//! Model fitting for Python: `FitConfig`, `FitResult`, `fit_pose`, `pose_from_joints`.
+
+use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
+use super::body::PyBodyModel;
+use super::camera::PyCamera;
+use crate::body::{pose_from_slice, BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, PART_NAMES};
+use crate::cloud::Connectivity;
+use crate::error::Error;
+use crate::fit::{self, EmConfig, FitConfig, Loss, PosePrior};
+use nalgebra::Vector3;
+use numpy::PyArrayDyn;
+use pyo3::prelude::*;
+use std::collections::HashMap;
+
+/// Settings of `fit_pose` (see the Rust docs of `depthpose::fit::em::EmConfig`).
+#[pyclass(name = "FitConfig", module = "depthpose._core", get_all, eq)]
+#[derive(Clone, PartialEq)]
+pub struct PyFitConfig {
+    sigma: f64,
+    loss: String,
+    loss_scale: f64,
+    potts: f64,
+    contrast_weight: f64,
+    contrast_sigma: f64,
+    outlier_distance: f64,
+    outlier_distance_start: f64,
+    anneal_iterations: usize,
+    truncation_factor: f64,
+    max_iterations: usize,
+    label_change_tolerance: f64,
+    energy_tolerance: f64,
+    expansion_cycles: usize,
+    lm_max_iterations: usize,
+    connectivity: u32,
+}
+
+impl PyFitConfig {
+    fn to_rust(&self) -> crate::Result<FitConfig> {
+        let loss = match self.loss.as_str() {
+            "squared" => Loss::Squared,
+            "huber" => Loss::Huber(self.loss_scale),
+            "cauchy" => Loss::Cauchy(self.loss_scale),
+            other => {
+                return Err(Error::invalid(
+                    "loss",
+                    format!("must be 'squared', 'huber' or 'cauchy', got {other:?}"),
+                ))
+            }
+        };
+        let d = EmConfig::default();
+        let em = EmConfig {
+            sigma: self.sigma,
+            loss,
+            potts: self.potts,
+            contrast_weight: self.contrast_weight,
+            contrast_sigma: self.contrast_sigma,
+            outlier_distance: self.outlier_distance,
+            outlier_distance_start: self.outlier_distance_start,
+            anneal_iterations: self.anneal_iterations,
+            truncation_factor: self.truncation_factor,
+            max_iterations: self.max_iterations,
+            label_change_tolerance: self.label_change_tolerance,
+            energy_tolerance: self.energy_tolerance,
+            expansion_cycles: self.expansion_cycles,
+            lm: fit::LmConfig {
+                max_iterations: self.lm_max_iterations,
+                ..d.lm
+            },
+        };
+        if !(self.loss_scale.is_finite() && self.loss_scale > 0.0) {
+            return Err(Error::invalid(
+                "loss_scale",
+                format!("must be finite and > 0, got {}", self.loss_scale),
+            ));
+        }
+        em.validate().map_err(|e| match e {
+            Error::InvalidArgument { name, message } if name == "max_iterations" => {
+                Error::invalid("lm_max_iterations", message)
+            }
+            other => other,
+        })?;
+        Ok(FitConfig {
+            em,
+            connectivity: Connectivity::from_int(self.connectivity)?,
+        })
+    }
+}
+
+const DEFAULT_LOSS_SCALE: f64 = 0.03;
+
+#[pymethods]
+impl PyFitConfig {
+    /// All keyword arguments; defaults are the Rust defaults. Invalid values raise
+    /// `InvalidInputError` naming the field.
+    #[new]
+    #[pyo3(signature = (*, sigma=None, loss="squared", loss_scale=DEFAULT_LOSS_SCALE, potts=None,
+        contrast_weight=None, contrast_sigma=None, outlier_distance=None,
+        outlier_distance_start=None, anneal_iterations=None, truncation_factor=None,
+        max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
+        expansion_cycles=None, lm_max_iterations=None, connectivity=4))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        sigma: Option<f64>,
+        loss: &str,
+        loss_scale: f64,
+        potts: Option<f64>,
+        contrast_weight: Option<f64>,
+        contrast_sigma: Option<f64>,
+        outlier_distance: Option<f64>,
+        outlier_distance_start: Option<f64>,
+        anneal_iterations: Option<i64>,
+        truncation_factor: Option<f64>,
+        max_iterations: Option<i64>,
+        label_change_tolerance: Option<f64>,
+        energy_tolerance: Option<f64>,
+        expansion_cycles: Option<i64>,
+        lm_max_iterations: Option<i64>,
+        connectivity: i64,
+    ) -> PyResult<Self> {
+        let d = EmConfig::default();
+        let count = |v: Option<i64>, default: usize, name: &str| -> PyResult<usize> {
+            match v {
+                None => Ok(default),
+                Some(v) if v >= 0 => Ok(v as usize),
+                Some(v) => Err(Error::invalid(name, format!("must be >= 0, got {v}")).into()),
+            }
+        };
+        let cfg = PyFitConfig {
+            sigma: sigma.unwrap_or(d.sigma),
+            loss: loss.to_string(),
+            loss_scale,
+            potts: potts.unwrap_or(d.potts),
+            contrast_weight: contrast_weight.unwrap_or(d.contrast_weight),
+            contrast_sigma: contrast_sigma.unwrap_or(d.contrast_sigma),
+            outlier_distance: outlier_distance.unwrap_or(d.outlier_distance),
+            outlier_distance_start: outlier_distance_start.unwrap_or(d.outlier_distance_start),
+            anneal_iterations: count(anneal_iterations, d.anneal_iterations, "anneal_iterations")?,
+            truncation_factor: truncation_factor.unwrap_or(d.truncation_factor),
+            max_iterations: count(max_iterations, d.max_iterations, "max_iterations")?,
+            label_change_tolerance: label_change_tolerance.unwrap_or(d.label_change_tolerance),
+            energy_tolerance: energy_tolerance.unwrap_or(d.energy_tolerance),
+            expansion_cycles: count(expansion_cycles, d.expansion_cycles, "expansion_cycles")?,
+            lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
+            connectivity: u32::try_from(connectivity).unwrap_or(0),
+        };
+        cfg.to_rust()?;
+        Ok(cfg)
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={})",
+            self.sigma, self.loss, self.potts, self.contrast_weight, self.outlier_distance,
+            self.max_iterations
+        )
+    }
+}
+
+type F64Array<'py> = Bound<'py, PyArrayDyn<f64>>;
+
+/// Outcome of `fit_pose`.
+#[pyclass(name = "FitResult", module = "depthpose._core")]
+pub struct PyFitResult {
+    result: fit::FitResult,
+    height: usize,
+    width: usize,
+}
+
+#[pymethods]
+impl PyFitResult {
+    /// The fitted pose (22,).
+    #[getter]
+    fn pose<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+        to_numpy(py, self.result.pose.to_vec(), &[NUM_PARAMS])
+    }
+    /// The 15 joints (15, 3), camera frame, ITOP order.
+    #[getter]
+    fn joints<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+        let v = self
+            .result
+            .joints
+            .iter()
+            .flat_map(|j| [j.x, j.y, j.z])
+            .collect();
+        to_numpy(py, v, &[NUM_JOINTS, 3])
+    }
+    /// Part labels (H, W) int16: segment 0..15, −1 = background or outlier.
+    #[getter]
+    fn labels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<i16>> {
+        to_numpy(py, self.result.labels.clone(), &[self.height, self.width])
+    }
+    #[getter]
+    fn energy(&self) -> f64 {
+        self.result.energy
+    }
+    #[getter]
+    fn energy_trace<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+        let n = self.result.energy_trace.len();
+        to_numpy(py, self.result.energy_trace.clone(), &[n])
+    }
+    #[getter]
+    fn iterations(&self) -> usize {
+        self.result.iterations
+    }
+    #[getter]
+    fn converged(&self) -> bool {
+        self.result.converged()
+    }
+    /// Why the EM loop stopped: "converged", "stationary" or "max_iterations".
+    #[getter]
+    fn reason(&self) -> &'static str {
+        self.result.termination.name()
+    }
+    /// Points per part, keyed by part name.
+    #[getter]
+    fn part_counts(&self) -> HashMap<&'static str, usize> {
+        (0..NUM_SEGMENTS)
+            .map(|k| (PART_NAMES[k], self.result.part_counts[k]))
+            .collect()
+    }
+    /// Foreground points labelled outlier.
+    #[getter]
+    fn outliers(&self) -> usize {
+        self.result.outliers
+    }
+    fn __repr__(&self) -> String {
+        format!(
+            "FitResult(energy={:.4}, iterations={}, reason={:?})",
+            self.result.energy,
+            self.result.iterations,
+            self.result.termination.name()
+        )
+    }
+}
+
+/// Fits the body to the depth image from `init_pose` (hard EM: CRF labels + LM).
+#[pyfunction]
+#[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
+#[allow(clippy::too_many_arguments)]
+fn fit_pose(
+    py: Python<'_>,
+    depth: &Bound<'_, PyAny>,
+    camera: &PyCamera,
+    init_pose: &Bound<'_, PyAny>,
+    model: Option<&PyBodyModel>,
+    mask: Option<&Bound<'_, PyAny>>,
+    config: Option<&PyFitConfig>,
+    prior: Option<&Bound<'_, PyAny>>,
+    prior_weight: f64,
+) -> PyResult<PyFitResult> {
+    let d = depth_array(depth, "depth")?;
+    let (h, w) = (d.shape[0], d.shape[1]);
+    camera.inner.check_image("depth", h, w)?;
+    let init = f64_array(init_pose, "init_pose", Some(1), false)?;
+    pose_from_slice(&init.data, "init_pose")?;
+    let mask = mask.map(|m| bool_array(m, "mask", &[h, w])).transpose()?;
+    let cfg = match config {
+        Some(c) => c.to_rust()?,
+        None => FitConfig::default(),
+    };
+    let prior = match prior {
+        Some(p) => {
+            let a = f64_array(p, "prior", Some(1), true)?;
+            if !(prior_weight.is_finite() && prior_weight >= 0.0) {
+                return Err(Error::invalid(
+                    "prior_weight",
+                    format!("must be finite and >= 0, got {prior_weight}"),
+                )
+                .into());
+            }
+            Some(PosePrior::uniform(
+                pose_from_slice(&a.data, "prior")?,
+                prior_weight,
+                prior_weight,
+            ))
+        }
+        None => None,
+    };
+    let model = model.map_or_else(BodyModel::default, |m| m.inner.clone());
+    let cam = camera.inner;
+    let result = py.detach(|| {
+        fit::fit_pose(
+            &d.data,
+            &cam,
+            &init.data,
+            &model,
+            mask.as_deref(),
+            prior.as_ref(),
+            &cfg,
+        )
+    })?;
+    Ok(PyFitResult {
+        result,
+        height: h,
+        width: w,
+    })
+}
+
+/// The pose (22,) whose joints best match `joints` (15, 3) (NaN rows are skipped).
+#[pyfunction]
+#[pyo3(signature = (joints, model=None, init=None))]
+fn pose_from_joints<'py>(
+    py: Python<'py>,
+    joints: &Bound<'py, PyAny>,
+    model: Option<&PyBodyModel>,
+    init: Option<&Bound<'py, PyAny>>,
+) -> PyResult<F64Array<'py>> {
+    let a = f64_array(joints, "joints", Some(2), false)?;
+    if a.shape != [NUM_JOINTS, 3] {
+        return Err(Error::invalid(
+            "joints",
+            format!("expected shape ({NUM_JOINTS}, 3), got {:?}", a.shape),
+        )
+        .into());
+    }
+    if let Some(i) = a.data.iter().position(|v| v.is_infinite()) {
+        return Err(Error::invalid("joints", format!("infinite value at flat index {i}")).into());
+    }
+    let init = init
+        .map(|p| -> PyResult<_> {
+            let a = f64_array(p, "init", Some(1), true)?;
+            Ok(pose_from_slice(&a.data, "init")?)
+        })
+        .transpose()?;
+    let j: [Vector3<f64>; NUM_JOINTS] =
+        std::array::from_fn(|k| Vector3::new(a.data[3 * k], a.data[3 * k + 1], a.data[3 * k + 2]));
+    let model = model.map_or_else(BodyModel::default, |m| m.inner.clone());
+    let pose = py.detach(|| fit::pose_from_joints(&model, &j, init.as_ref()))?;
+    Ok(to_numpy(py, pose.to_vec(), &[NUM_PARAMS]))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyFitConfig>()?;
+    m.add_class::<PyFitResult>()?;
+    m.add_function(wrap_pyfunction!(fit_pose, m)?)?;
+    m.add_function(wrap_pyfunction!(pose_from_joints, m)?)?;
+    Ok(())
+}

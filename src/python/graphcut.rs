@@ -1,0 +1,599 @@
+//! Max-flow graphs and CRF move-making solvers for Python (`depthpose.graphcut`).
+
+use super::arrays::{f64_array, i64_array, to_numpy};
+use crate::graphcut::{
+    alpha_beta_swap as swap_core, alpha_expansion as expansion_core, energy as energy_core,
+    grid_edges as grid_edges_core, Cost, CrfProblem, Graph, Labelling, MoveConfig,
+};
+use crate::Error;
+use numpy::{PyArrayDescrMethods, PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::PyAny;
+
+type BoolArray<'py> = Bound<'py, PyArrayDyn<bool>>;
+type I32Array<'py> = Bound<'py, PyArrayDyn<i32>>;
+type I64Array<'py> = Bound<'py, PyArrayDyn<i64>>;
+
+/// A graph of either capacity type.
+enum Inner {
+    F(Graph<f64>),
+    I(Graph<i64>),
+}
+
+/// True if `dtype` (anything `numpy.dtype()` accepts) is an integer type, false for a
+/// float type; an error naming `dtype` otherwise.
+fn is_integer_dtype(dtype: &Bound<PyAny>) -> PyResult<bool> {
+    let py = dtype.py();
+    let dt = py
+        .import("numpy")?
+        .getattr("dtype")?
+        .call1((dtype,))
+        .map_err(|_| Error::invalid("dtype", "not a dtype; use float or int"))?;
+    let kind: String = dt.getattr("kind")?.extract()?;
+    match kind.as_str() {
+        "f" => Ok(false),
+        "i" | "u" => Ok(true),
+        _ => Err(Error::invalid("dtype", format!("must be float or int, got {dt}")).into()),
+    }
+}
+
+/// Is `obj` a numpy array with an integer dtype?
+fn array_is_integer(obj: &Bound<PyAny>) -> bool {
+    obj.cast::<PyUntypedArray>()
+        .map(|a| {
+            let k = a.dtype().kind();
+            k == b'i' || k == b'u'
+        })
+        .unwrap_or(false)
+}
+
+/// A 1-D index array of node ids (each in 0..n) as `u32`. Empty arrays are allowed.
+fn node_indices(obj: &Bound<PyAny>, name: &str, n: usize) -> PyResult<Vec<u32>> {
+    if is_empty_array(obj, name, Some(1))? {
+        return Ok(Vec::new());
+    }
+    let a = i64_array(obj, name, Some(1))?;
+    indices_in_range(&a.data, name, n)
+}
+
+fn indices_in_range(data: &[i64], name: &str, n: usize) -> PyResult<Vec<u32>> {
+    if let Some(k) = data.iter().position(|&v| v < 0 || v as u64 >= n as u64) {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "node index {} at position {k} out of range for {n} nodes",
+                data[k]
+            ),
+        )
+        .into());
+    }
+    Ok(data.iter().map(|&v| v as u32).collect())
+}
+
+/// True for a numpy array of size 0 (with `ndim` checked); errors for non-arrays.
+fn is_empty_array(obj: &Bound<PyAny>, name: &str, ndim: Option<usize>) -> PyResult<bool> {
+    let arr = obj
+        .cast::<PyUntypedArray>()
+        .map_err(|_| Error::invalid(name, "expected a numpy array"))?;
+    if let Some(d) = ndim {
+        if arr.ndim() != d {
+            return Err(Error::invalid(
+                name,
+                format!("expected a {d}-D array, got shape {:?}", arr.shape()),
+            )
+            .into());
+        }
+    }
+    Ok(arr.len() == 0)
+}
+
+fn f64_caps(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<f64>> {
+    if is_empty_array(obj, name, Some(1))? {
+        return Ok(Vec::new());
+    }
+    Ok(f64_array(obj, name, Some(1), true)?.data)
+}
+
+fn i64_caps(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<i64>> {
+    if is_empty_array(obj, name, Some(1))? {
+        return Ok(Vec::new());
+    }
+    Ok(i64_array(obj, name, Some(1))
+        .map_err(|e| Error::invalid(name, format!("an int graph needs integer capacities ({e})")))?
+        .data)
+}
+
+/// A directed graph with source and sink for max-flow / min-cut (Boykov–Kolmogorov).
+#[pyclass(name = "MaxflowGraph", module = "depthpose._core")]
+pub struct PyGraph {
+    inner: Inner,
+}
+
+#[pymethods]
+impl PyGraph {
+    #[new]
+    #[pyo3(signature = (n_nodes, dtype=None, edge_hint=0))]
+    fn new(n_nodes: i64, dtype: Option<&Bound<PyAny>>, edge_hint: i64) -> PyResult<Self> {
+        if n_nodes <= 0 || n_nodes >= u32::MAX as i64 - 3 {
+            return Err(Error::invalid(
+                "n_nodes",
+                format!("must be in 1..{}, got {n_nodes}", u32::MAX - 3),
+            )
+            .into());
+        }
+        let hint = edge_hint.clamp(0, i64::from(u32::MAX) / 2) as usize;
+        let integer = match dtype {
+            Some(d) => is_integer_dtype(d)?,
+            None => false,
+        };
+        let n = n_nodes as usize;
+        let inner = if integer {
+            Inner::I(Graph::with_capacity(n, hint))
+        } else {
+            Inner::F(Graph::with_capacity(n, hint))
+        };
+        Ok(PyGraph { inner })
+    }
+
+    /// Number of nodes.
+    #[getter]
+    fn n_nodes(&self) -> usize {
+        match &self.inner {
+            Inner::F(g) => g.n_nodes(),
+            Inner::I(g) => g.n_nodes(),
+        }
+    }
+
+    /// Number of edges added.
+    #[getter]
+    fn n_edges(&self) -> usize {
+        match &self.inner {
+            Inner::F(g) => g.n_edges(),
+            Inner::I(g) => g.n_edges(),
+        }
+    }
+
+    /// True for an integer-capacity graph.
+    #[getter]
+    fn is_integer(&self) -> bool {
+        matches!(self.inner, Inner::I(_))
+    }
+
+    /// Heap bytes held by the graph.
+    fn memory_bytes(&self) -> usize {
+        match &self.inner {
+            Inner::F(g) => g.memory_bytes(),
+            Inner::I(g) => g.memory_bytes(),
+        }
+    }
+
+    /// Adds edges src[k] → dst[k] with capacity cap[k] and dst[k] → src[k] with rev_cap[k].
+    fn add_edges(
+        &mut self,
+        py: Python<'_>,
+        src: &Bound<PyAny>,
+        dst: &Bound<PyAny>,
+        cap: &Bound<PyAny>,
+        rev_cap: &Bound<PyAny>,
+    ) -> PyResult<()> {
+        let n = self.n_nodes();
+        let s = node_indices(src, "src", n)?;
+        let d = node_indices(dst, "dst", n)?;
+        match &mut self.inner {
+            Inner::F(g) => {
+                let (c, r) = (f64_caps(cap, "cap")?, f64_caps(rev_cap, "rev_cap")?);
+                py.detach(|| g.add_edges(&s, &d, &c, &r))?;
+            }
+            Inner::I(g) => {
+                let (c, r) = (i64_caps(cap, "cap")?, i64_caps(rev_cap, "rev_cap")?);
+                py.detach(|| g.add_edges(&s, &d, &c, &r))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Adds source_cap[k] to source → nodes[k] and sink_cap[k] to nodes[k] → sink.
+    fn add_terminal_edges(
+        &mut self,
+        nodes: &Bound<PyAny>,
+        source_cap: &Bound<PyAny>,
+        sink_cap: &Bound<PyAny>,
+    ) -> PyResult<()> {
+        let idx = node_indices(nodes, "nodes", self.n_nodes())?;
+        match &mut self.inner {
+            Inner::F(g) => {
+                let (s, t) = (
+                    f64_caps(source_cap, "source_cap")?,
+                    f64_caps(sink_cap, "sink_cap")?,
+                );
+                g.add_tweights_batch(&idx, &s, &t)?;
+            }
+            Inner::I(g) => {
+                let (s, t) = (
+                    i64_caps(source_cap, "source_cap")?,
+                    i64_caps(sink_cap, "sink_cap")?,
+                );
+                g.add_tweights_batch(&idx, &s, &t)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Changes terminal capacities by (possibly negative) deltas, also after a solve;
+    /// the next `maxflow()` then reuses the previous search trees.
+    fn update_terminal_edges(
+        &mut self,
+        nodes: &Bound<PyAny>,
+        delta_source: &Bound<PyAny>,
+        delta_sink: &Bound<PyAny>,
+    ) -> PyResult<()> {
+        let idx = node_indices(nodes, "nodes", self.n_nodes())?;
+        let m = idx.len();
+        macro_rules! apply {
+            ($g:expr, $conv:expr) => {{
+                let s = $conv(delta_source, "delta_source")?;
+                let t = $conv(delta_sink, "delta_sink")?;
+                for (name, len) in [("delta_source", s.len()), ("delta_sink", t.len())] {
+                    if len != m {
+                        return Err(Error::invalid(
+                            name,
+                            format!("length {len} does not match nodes length {m}"),
+                        )
+                        .into());
+                    }
+                }
+                for k in 0..m {
+                    $g.update_tweights(idx[k] as usize, s[k], t[k])?;
+                }
+            }};
+        }
+        match &mut self.inner {
+            Inner::F(g) => apply!(g, f64_caps),
+            Inner::I(g) => apply!(g, |o: &Bound<PyAny>, n: &str| -> PyResult<Vec<i64>> {
+                i64_caps(o, n)
+            }),
+        }
+        Ok(())
+    }
+
+    /// Computes the maximum flow; returns its value (float, or int for an int graph).
+    fn maxflow(&mut self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+        Ok(match &mut self.inner {
+            Inner::F(g) => py
+                .detach(|| g.maxflow())
+                .into_pyobject(py)?
+                .into_any()
+                .unbind(),
+            Inner::I(g) => py
+                .detach(|| g.maxflow())
+                .into_pyobject(py)?
+                .into_any()
+                .unbind(),
+        })
+    }
+
+    /// The side of each node in the minimum cut: True = sink side.
+    fn segments<'py>(&self, py: Python<'py>) -> BoolArray<'py> {
+        let (seg, n) = match &self.inner {
+            Inner::F(g) => (g.segments(), g.n_nodes()),
+            Inner::I(g) => (g.segments(), g.n_nodes()),
+        };
+        to_numpy(py, seg, &[n])
+    }
+}
+
+/// Edges (E, 2) int64 of an h×w pixel grid with row-major node ids, 4- or 8-connected.
+#[pyfunction]
+#[pyo3(signature = (h, w, connectivity=4))]
+fn grid_edges<'py>(py: Python<'py>, h: i64, w: i64, connectivity: i64) -> PyResult<I64Array<'py>> {
+    for (name, v) in [("h", h), ("w", w)] {
+        if v <= 0 {
+            return Err(Error::invalid(name, format!("must be positive, got {v}")).into());
+        }
+    }
+    if connectivity != 4 && connectivity != 8 {
+        return Err(Error::invalid(
+            "connectivity",
+            format!("must be 4 or 8, got {connectivity}"),
+        )
+        .into());
+    }
+    let e = py.detach(|| grid_edges_core(h as usize, w as usize, connectivity as u8))?;
+    let m = e.len();
+    let flat: Vec<i64> = e.into_iter().flatten().map(i64::from).collect();
+    Ok(to_numpy(py, flat, &[m, 2]))
+}
+
+/// Parsed CRF arguments of one cost type.
+struct CrfArgs<C> {
+    unary: Vec<C>,
+    n_labels: usize,
+    edges: Vec<[u32; 2]>,
+    weights: Vec<C>,
+    pairwise: Option<Vec<C>>,
+}
+
+impl<C: Cost> CrfArgs<C> {
+    fn problem(&self) -> CrfProblem<'_, C> {
+        CrfProblem {
+            unary: &self.unary,
+            n_labels: self.n_labels,
+            edges: &self.edges,
+            weights: &self.weights,
+            pairwise: self.pairwise.as_deref(),
+        }
+    }
+}
+
+fn edges_arg(edges: &Bound<PyAny>, n: usize) -> PyResult<Vec<[u32; 2]>> {
+    if is_empty_array(edges, "edges", None)? {
+        return Ok(Vec::new());
+    }
+    let e = i64_array(edges, "edges", Some(2))?;
+    if e.shape[1] != 2 {
+        return Err(
+            Error::invalid("edges", format!("expected shape (E, 2), got {:?}", e.shape)).into(),
+        );
+    }
+    let idx = indices_in_range(&e.data, "edges", n)?;
+    Ok(idx.chunks_exact(2).map(|p| [p[0], p[1]]).collect())
+}
+
+fn unary_shape(unary: &Bound<PyAny>) -> PyResult<(usize, usize)> {
+    let arr = unary
+        .cast::<PyUntypedArray>()
+        .map_err(|_| Error::invalid("unary", "expected a numpy array"))?;
+    if arr.ndim() != 2 || arr.len() == 0 {
+        return Err(Error::invalid(
+            "unary",
+            format!(
+                "expected a non-empty (N, L) array, got shape {:?}",
+                arr.shape()
+            ),
+        )
+        .into());
+    }
+    Ok((arr.shape()[0], arr.shape()[1]))
+}
+
+fn f64_crf(
+    unary: &Bound<PyAny>,
+    edges: &Bound<PyAny>,
+    weights: &Bound<PyAny>,
+    pairwise: Option<&Bound<PyAny>>,
+) -> PyResult<CrfArgs<f64>> {
+    let (n, l) = unary_shape(unary)?;
+    // +inf forbids a label; NaN and -inf are rejected by the core check.
+    let u = f64_array(unary, "unary", Some(2), false)?.data;
+    let e = edges_arg(edges, n)?;
+    let w = f64_caps(weights, "weights")?;
+    let v = match pairwise {
+        Some(p) => Some(pairwise_arg(p, l, |o| {
+            f64_array(o, "pairwise", Some(2), true)
+        })?),
+        None => None,
+    };
+    Ok(CrfArgs {
+        unary: u,
+        n_labels: l,
+        edges: e,
+        weights: w,
+        pairwise: v,
+    })
+}
+
+fn i64_crf(
+    unary: &Bound<PyAny>,
+    edges: &Bound<PyAny>,
+    weights: &Bound<PyAny>,
+    pairwise: Option<&Bound<PyAny>>,
+) -> PyResult<CrfArgs<i64>> {
+    let (n, l) = unary_shape(unary)?;
+    let u = i64_array(unary, "unary", Some(2))?.data;
+    let e = edges_arg(edges, n)?;
+    let w = if is_empty_array(weights, "weights", Some(1))? {
+        Vec::new()
+    } else {
+        i64_array(weights, "weights", Some(1))?.data
+    };
+    let v = match pairwise {
+        Some(p) => Some(pairwise_arg(p, l, |o| i64_array(o, "pairwise", Some(2)))?),
+        None => None,
+    };
+    Ok(CrfArgs {
+        unary: u,
+        n_labels: l,
+        edges: e,
+        weights: w,
+        pairwise: v,
+    })
+}
+
+fn pairwise_arg<C>(
+    p: &Bound<PyAny>,
+    l: usize,
+    conv: impl Fn(&Bound<PyAny>) -> PyResult<super::arrays::Arr<C>>,
+) -> PyResult<Vec<C>> {
+    let a = conv(p)?;
+    if a.shape != [l, l] {
+        return Err(Error::invalid(
+            "pairwise",
+            format!(
+                "expected shape ({l}, {l}) for {l} labels, got {:?}",
+                a.shape
+            ),
+        )
+        .into());
+    }
+    Ok(a.data)
+}
+
+fn init_arg(init: Option<&Bound<PyAny>>) -> PyResult<Option<Vec<i32>>> {
+    let Some(init) = init else { return Ok(None) };
+    let a = i64_array(init, "init", Some(1))?;
+    if let Some(k) = a
+        .data
+        .iter()
+        .position(|&v| v < i64::from(i32::MIN) || v > i64::from(i32::MAX))
+    {
+        return Err(Error::invalid(
+            "init",
+            format!("label {} at node {k} out of range", a.data[k]),
+        )
+        .into());
+    }
+    Ok(Some(a.data.iter().map(|&v| v as i32).collect()))
+}
+
+/// Integer mode: unary, weights (and pairwise) all of integer dtype.
+fn integer_mode(
+    unary: &Bound<PyAny>,
+    weights: &Bound<PyAny>,
+    pairwise: Option<&Bound<PyAny>>,
+) -> bool {
+    let weights_int = array_is_integer(weights)
+        || weights
+            .cast::<PyUntypedArray>()
+            .map(|a| a.len() == 0)
+            .unwrap_or(false);
+    array_is_integer(unary) && weights_int && pairwise.is_none_or(array_is_integer)
+}
+
+type Solver<C> = fn(&CrfProblem<C>, Option<&[i32]>, &MoveConfig) -> crate::Result<Labelling<C>>;
+
+#[allow(clippy::too_many_arguments)]
+fn solve<'py>(
+    py: Python<'py>,
+    unary: &Bound<'py, PyAny>,
+    edges: &Bound<'py, PyAny>,
+    weights: &Bound<'py, PyAny>,
+    pairwise: Option<&Bound<'py, PyAny>>,
+    init: Option<&Bound<'py, PyAny>>,
+    max_cycles: i64,
+    f: Solver<f64>,
+    i: Solver<i64>,
+) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
+    if max_cycles < 0 {
+        return Err(Error::invalid(
+            "max_cycles",
+            format!("must be non-negative, got {max_cycles}"),
+        )
+        .into());
+    }
+    let cfg = MoveConfig {
+        max_cycles: max_cycles as usize,
+    };
+    let init = init_arg(init)?;
+    if integer_mode(unary, weights, pairwise) {
+        let args = i64_crf(unary, edges, weights, pairwise)?;
+        let r = py.detach(|| i(&args.problem(), init.as_deref(), &cfg))?;
+        let n = r.labels.len();
+        Ok((
+            to_numpy(py, r.labels, &[n]),
+            r.energy.into_pyobject(py)?.into_any().unbind(),
+        ))
+    } else {
+        let args = f64_crf(unary, edges, weights, pairwise)?;
+        let r = py.detach(|| f(&args.problem(), init.as_deref(), &cfg))?;
+        let n = r.labels.len();
+        Ok((
+            to_numpy(py, r.labels, &[n]),
+            r.energy.into_pyobject(py)?.into_any().unbind(),
+        ))
+    }
+}
+
+/// Alpha-expansion on E(l) = Σ unary[i, l_i] + Σ_e weights[e]·pairwise[l_i, l_j].
+/// Returns (labels int32 (N,), energy); integer inputs give an exact int energy.
+#[pyfunction]
+#[pyo3(signature = (unary, edges, weights, *, pairwise=None, init=None, max_cycles=20))]
+fn alpha_expansion<'py>(
+    py: Python<'py>,
+    unary: &Bound<'py, PyAny>,
+    edges: &Bound<'py, PyAny>,
+    weights: &Bound<'py, PyAny>,
+    pairwise: Option<&Bound<'py, PyAny>>,
+    init: Option<&Bound<'py, PyAny>>,
+    max_cycles: i64,
+) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
+    solve(
+        py,
+        unary,
+        edges,
+        weights,
+        pairwise,
+        init,
+        max_cycles,
+        expansion_core::<f64>,
+        expansion_core::<i64>,
+    )
+}
+
+/// Alpha-beta swap (semi-metric pairwise), same arguments as `alpha_expansion`.
+#[pyfunction]
+#[pyo3(signature = (unary, edges, weights, *, pairwise=None, init=None, max_cycles=20))]
+fn alpha_beta_swap<'py>(
+    py: Python<'py>,
+    unary: &Bound<'py, PyAny>,
+    edges: &Bound<'py, PyAny>,
+    weights: &Bound<'py, PyAny>,
+    pairwise: Option<&Bound<'py, PyAny>>,
+    init: Option<&Bound<'py, PyAny>>,
+    max_cycles: i64,
+) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
+    solve(
+        py,
+        unary,
+        edges,
+        weights,
+        pairwise,
+        init,
+        max_cycles,
+        swap_core::<f64>,
+        swap_core::<i64>,
+    )
+}
+
+/// The CRF energy of `labels` (int for integer inputs; inf if a label is forbidden).
+#[pyfunction]
+#[pyo3(signature = (labels, unary, edges, weights, pairwise=None))]
+fn crf_energy(
+    py: Python<'_>,
+    labels: &Bound<PyAny>,
+    unary: &Bound<PyAny>,
+    edges: &Bound<PyAny>,
+    weights: &Bound<PyAny>,
+    pairwise: Option<&Bound<PyAny>>,
+) -> PyResult<Py<PyAny>> {
+    let lab = i64_array(labels, "labels", Some(1))?;
+    if let Some(k) = lab
+        .data
+        .iter()
+        .position(|&v| v < 0 || v > i64::from(i32::MAX))
+    {
+        return Err(Error::invalid(
+            "labels",
+            format!("label {} at node {k} out of range", lab.data[k]),
+        )
+        .into());
+    }
+    let lab: Vec<i32> = lab.data.iter().map(|&v| v as i32).collect();
+    if integer_mode(unary, weights, pairwise) {
+        let a = i64_crf(unary, edges, weights, pairwise)?;
+        let e = py.detach(|| energy_core(&a.problem(), &lab))?;
+        Ok(e.into_pyobject(py)?.into_any().unbind())
+    } else {
+        let a = f64_crf(unary, edges, weights, pairwise)?;
+        let e = py.detach(|| energy_core(&a.problem(), &lab))?;
+        Ok(e.into_pyobject(py)?.into_any().unbind())
+    }
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PyGraph>()?;
+    m.add_function(wrap_pyfunction!(grid_edges, m)?)?;
+    m.add_function(wrap_pyfunction!(alpha_expansion, m)?)?;
+    m.add_function(wrap_pyfunction!(alpha_beta_swap, m)?)?;
+    m.add_function(wrap_pyfunction!(crf_energy, m)?)?;
+    Ok(())
+}
