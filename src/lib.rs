@@ -5,9 +5,11 @@
 //! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
 //! [`python`] behind the `python` feature; algorithms never live there.
 
+pub mod assignment;
 pub mod body;
 pub mod camera;
 pub mod cloud;
+pub mod descriptor;
 pub mod error;
 pub mod io;
 pub mod render;
