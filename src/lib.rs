@@ -13,6 +13,7 @@ pub mod descriptor;
 pub mod error;
 pub mod io;
 pub mod render;
+pub mod templates;
 
 #[cfg(feature = "python")]
 mod python;
