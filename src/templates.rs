@@ -651,6 +651,260 @@ impl TemplateDatabase {
     }
 }
 
+/// A database as flat arrays (what the Python layer stores in a file).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TemplateArrays {
+    pub format_version: u32,
+    pub hash: u64,
+    /// Model shape, [`crate::body::SHAPE_PARAM_NAMES`] order.
+    pub shape: Vec<f64>,
+    /// [`TemplateConfig`] as numbers (see [`config_to_vec`]).
+    pub config: Vec<f64>,
+    pub poses: Vec<f64>,
+    pub views: Vec<i64>,
+    pub joints: Vec<f64>,
+    pub centroids: Vec<f64>,
+    pub sizes: Vec<f64>,
+    /// Samples per template.
+    pub counts: Vec<i64>,
+    pub context_scale: Vec<f64>,
+    pub context_centroid: Vec<f64>,
+    pub context_points: Vec<i64>,
+    /// All templates' samples concatenated: pixels (S×2), positions (S×2),
+    /// descriptors (S×dim).
+    pub sample_pixels: Vec<f32>,
+    pub sample_positions: Vec<f32>,
+    pub descriptors: Vec<f32>,
+}
+
+/// Number of values of [`config_to_vec`].
+pub const CONFIG_VALUES: usize = 15;
+/// Largest seed that survives the trip through f64.
+pub const MAX_SEED: u64 = 1 << 53;
+
+/// [`TemplateConfig`] as numbers: width, height, distance, field_height, renderer
+/// (0 super-quadric, 1 ellipsoid), mesh rings, sectors, then the descriptor's samples,
+/// radial_bins, angular_bins, inner_radius, outer_radius, cells_per_sample, seed,
+/// normal_radius.
+pub fn config_to_vec(c: &TemplateConfig) -> [f64; CONFIG_VALUES] {
+    let d = &c.descriptor;
+    [
+        c.width as f64,
+        c.height as f64,
+        c.distance,
+        c.field_height,
+        match c.renderer {
+            TemplateRenderer::Superquadric => 0.0,
+            TemplateRenderer::Ellipsoid => 1.0,
+        },
+        c.mesh.rings as f64,
+        c.mesh.sectors as f64,
+        d.samples as f64,
+        d.radial_bins as f64,
+        d.angular_bins as f64,
+        d.inner_radius,
+        d.outer_radius,
+        d.cells_per_sample,
+        d.seed as f64,
+        d.normal_radius as f64,
+    ]
+}
+
+/// The inverse of [`config_to_vec`] (validated).
+pub fn config_from_vec(v: &[f64]) -> Result<TemplateConfig> {
+    ensure(v.len() == CONFIG_VALUES, "config", || {
+        format!("needs {CONFIG_VALUES} values, got {}", v.len())
+    })?;
+    let int = |x: f64, name: &str| -> Result<usize> {
+        ensure(
+            x.is_finite() && x >= 0.0 && x.fract() == 0.0 && x < 1e15,
+            name,
+            || format!("must be a whole number, got {x}"),
+        )?;
+        Ok(x as usize)
+    };
+    let renderer = match int(v[4], "renderer")? {
+        0 => TemplateRenderer::Superquadric,
+        1 => TemplateRenderer::Ellipsoid,
+        r => {
+            return Err(crate::Error::invalid(
+                "renderer",
+                format!("unknown renderer {r}"),
+            ))
+        }
+    };
+    let c = TemplateConfig {
+        width: int(v[0], "width")?,
+        height: int(v[1], "height")?,
+        distance: v[2],
+        field_height: v[3],
+        renderer,
+        mesh: MeshConfig {
+            rings: int(v[5], "rings")?,
+            sectors: int(v[6], "sectors")?,
+        },
+        descriptor: DescriptorConfig {
+            samples: int(v[7], "samples")?,
+            radial_bins: int(v[8], "radial_bins")?,
+            angular_bins: int(v[9], "angular_bins")?,
+            inner_radius: v[10],
+            outer_radius: v[11],
+            cells_per_sample: v[12],
+            seed: int(v[13], "seed")? as u64,
+            normal_radius: int(v[14], "normal_radius")?,
+        },
+    };
+    c.validate()?;
+    Ok(c)
+}
+
+impl TemplateDatabase {
+    /// The database as flat arrays.
+    pub fn to_arrays(&self) -> TemplateArrays {
+        let mut a = TemplateArrays {
+            format_version: FORMAT_VERSION,
+            hash: self.hash(),
+            shape: self.model.shape.to_vec().to_vec(),
+            config: config_to_vec(&self.config).to_vec(),
+            ..Default::default()
+        };
+        for t in &self.templates {
+            a.poses.extend_from_slice(&t.pose);
+            a.views.push(t.view as i64);
+            a.joints.extend(t.joints.iter().flatten());
+            a.centroids.extend_from_slice(&t.centroid);
+            a.sizes.push(t.size);
+            a.counts.push(t.context.len() as i64);
+            a.context_scale.push(t.context.scale);
+            a.context_centroid.extend_from_slice(&t.context.centroid);
+            a.context_points.push(t.context.points as i64);
+            a.sample_pixels.extend(t.context.pixels.iter().flatten());
+            a.sample_positions
+                .extend(t.context.positions.iter().flatten());
+            a.descriptors.extend_from_slice(&t.context.descriptors);
+        }
+        a
+    }
+
+    /// A database from [`Self::to_arrays`] output. `source` names the file in errors.
+    /// Refuses another format version, arrays that do not fit together, and — when
+    /// `expected` is given — a database of another model or other template settings
+    /// (by [`Self::settings_hash`]); all as [`crate::Error::File`].
+    pub fn from_arrays(
+        a: &TemplateArrays,
+        expected: Option<(&BodyModel, &TemplateConfig)>,
+        source: &str,
+    ) -> Result<Self> {
+        let bad = |msg: String| crate::Error::file(source, msg);
+        if a.format_version != FORMAT_VERSION {
+            return Err(bad(format!(
+                "template format version {} but this depthpose reads version {FORMAT_VERSION}; rebuild the database",
+                a.format_version
+            )));
+        }
+        let model = BodyModel::with_shape(
+            crate::body::BodyShape::from_vec(&a.shape)
+                .map_err(|e| bad(format!("bad model shape: {e}")))?,
+        );
+        let config =
+            config_from_vec(&a.config).map_err(|e| bad(format!("bad template settings: {e}")))?;
+        let hash = Self::settings_hash(&model, &config);
+        if hash != a.hash {
+            return Err(bad(format!(
+                "content hash {:016x} does not match its settings ({hash:016x}); the file is corrupt or from another template definition",
+                a.hash
+            )));
+        }
+        if let Some((m, c)) = expected {
+            let want = Self::settings_hash(m, c);
+            if want != hash {
+                return Err(bad(
+                    "the templates were built for another body model or other template settings; rebuild them"
+                        .to_string(),
+                ));
+            }
+        }
+        let t = NUM_TEMPLATES;
+        let dim = config.descriptor.dim();
+        let total: i64 = a.counts.iter().sum();
+        let sizes_ok = a.poses.len() == t * NUM_PARAMS
+            && a.views.len() == t
+            && a.joints.len() == t * NUM_JOINTS * 3
+            && a.centroids.len() == t * 3
+            && a.sizes.len() == t
+            && a.counts.len() == t
+            && a.context_scale.len() == t
+            && a.context_centroid.len() == t * 2
+            && a.context_points.len() == t
+            && a.counts.iter().all(|&c| c >= 2)
+            && a.sample_pixels.len() as i64 == 2 * total
+            && a.sample_positions.len() as i64 == 2 * total
+            && a.descriptors.len() as i64 == dim as i64 * total;
+        if !sizes_ok {
+            return Err(bad(
+                "the arrays do not fit together (truncated or corrupt file)".to_string(),
+            ));
+        }
+        let finite = a
+            .poses
+            .iter()
+            .chain(&a.joints)
+            .chain(&a.centroids)
+            .chain(&a.sizes)
+            .all(|v| v.is_finite())
+            && a.descriptors
+                .iter()
+                .chain(&a.sample_positions)
+                .all(|v| v.is_finite());
+        if !finite {
+            return Err(bad("non-finite values (corrupt file)".to_string()));
+        }
+        let mut templates = Vec::with_capacity(t);
+        let mut off = 0usize;
+        for i in 0..t {
+            let n = a.counts[i] as usize;
+            let mut pose = [0.0; NUM_PARAMS];
+            pose.copy_from_slice(&a.poses[i * NUM_PARAMS..(i + 1) * NUM_PARAMS]);
+            let view = a.views[i];
+            if !(0..NUM_VIEWS as i64).contains(&view) {
+                return Err(bad(format!("template {i} has view {view}")));
+            }
+            let pair = |v: &[f32], k: usize| [v[2 * k], v[2 * k + 1]];
+            templates.push(Template {
+                pose,
+                view: view as usize,
+                joints: std::array::from_fn(|j| {
+                    let b = (i * NUM_JOINTS + j) * 3;
+                    [a.joints[b], a.joints[b + 1], a.joints[b + 2]]
+                }),
+                centroid: [
+                    a.centroids[3 * i],
+                    a.centroids[3 * i + 1],
+                    a.centroids[3 * i + 2],
+                ],
+                size: a.sizes[i],
+                context: SurfaceContext {
+                    dim,
+                    pixels: (off..off + n).map(|k| pair(&a.sample_pixels, k)).collect(),
+                    positions: (off..off + n)
+                        .map(|k| pair(&a.sample_positions, k))
+                        .collect(),
+                    descriptors: a.descriptors[off * dim..(off + n) * dim].to_vec(),
+                    scale: a.context_scale[i],
+                    centroid: [a.context_centroid[2 * i], a.context_centroid[2 * i + 1]],
+                    points: a.context_points[i].max(0) as usize,
+                },
+            });
+            off += n;
+        }
+        Ok(TemplateDatabase {
+            model,
+            config,
+            templates,
+        })
+    }
+}
+
 /// `count` query samples spread over the body: farthest-point order from the sample
 /// nearest the centroid.
 fn representatives(query: &SurfaceContext, count: usize) -> Vec<usize> {
@@ -800,13 +1054,9 @@ mod tests {
         assert!(rasterize_meshes_into(&[], &cam, &mut [0.0; 3]).is_err());
     }
 
-    fn small_db() -> TemplateDatabase {
-        TemplateDatabase::build(&BodyModel::default(), &TemplateConfig::default()).unwrap()
-    }
-
     #[test]
     fn template_retrieves_itself_and_is_placed_at_the_body() {
-        let db = small_db();
+        let db = super::eval::database();
         assert_eq!(db.len(), NUM_TEMPLATES);
         let model = BodyModel::default();
         let cam = Camera::itop();
@@ -840,6 +1090,35 @@ mod tests {
     }
 
     #[test]
+    fn arrays_round_trip_and_refuse_mismatches() {
+        let db = super::eval::database();
+        let a = db.to_arrays();
+        let back = TemplateDatabase::from_arrays(&a, Some((&db.model, &db.config)), "f").unwrap();
+        assert_eq!(&back, db);
+        let mut v = a.clone();
+        v.format_version += 1;
+        assert!(matches!(
+            TemplateDatabase::from_arrays(&v, None, "f"),
+            Err(crate::Error::File { .. })
+        ));
+        let other = BodyModel::new(1.6).unwrap();
+        assert!(matches!(
+            TemplateDatabase::from_arrays(&a, Some((&other, &db.config)), "f"),
+            Err(crate::Error::File { .. })
+        ));
+        let mut v = a.clone();
+        v.descriptors.pop();
+        assert!(TemplateDatabase::from_arrays(&v, None, "f").is_err());
+        let mut v = a.clone();
+        v.shape[0] += 0.01;
+        assert!(TemplateDatabase::from_arrays(&v, None, "f").is_err());
+        assert_eq!(
+            config_from_vec(&config_to_vec(&db.config)).unwrap(),
+            db.config
+        );
+    }
+
+    #[test]
     fn hash_depends_on_model_and_settings() {
         let m = BodyModel::default();
         let c = TemplateConfig::default();
@@ -851,5 +1130,116 @@ mod tests {
         );
         let c2 = TemplateConfig { width: 80, ..c };
         assert_ne!(h, TemplateDatabase::settings_hash(&m, &c2));
+    }
+}
+
+#[cfg(test)]
+mod eval {
+    //! Retrieval accuracy on perturbed, noisy renders of the template poses.
+    use super::*;
+    use std::sync::OnceLock;
+
+    pub(super) fn database() -> &'static TemplateDatabase {
+        static DB: OnceLock<TemplateDatabase> = OnceLock::new();
+        DB.get_or_init(|| {
+            TemplateDatabase::build(&BodyModel::default(), &TemplateConfig::default()).unwrap()
+        })
+    }
+
+    pub(super) struct Rng(u64);
+    impl Rng {
+        pub(super) fn uniform(&mut self) -> f64 {
+            self.0 = self
+                .0
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (self.0 >> 11) as f64 / (1u64 << 53) as f64
+        }
+        pub(super) fn range(&mut self, lo: f64, hi: f64) -> f64 {
+            lo + (hi - lo) * self.uniform()
+        }
+        /// Approximately normal (sum of 4 uniforms), unit variance.
+        pub(super) fn normal(&mut self) -> f64 {
+            ((0..4).map(|_| self.uniform()).sum::<f64>() - 2.0) * 3f64.sqrt()
+        }
+    }
+
+    /// A perturbed, noisy depth image of template `t` and its true pose.
+    pub(super) fn query(
+        t: usize,
+        rng: &mut Rng,
+        cam: &Camera,
+        joint_noise: f64,
+    ) -> (Vec<f32>, Pose) {
+        let model = BodyModel::default();
+        let mut pose = template_pose(t, 3.0);
+        for v in pose[6..].iter_mut() {
+            *v += rng.range(-joint_noise, joint_noise);
+        }
+        pose[param::ROOT_R + 1] += rng.range(-joint_noise, joint_noise);
+        pose = BodyModel::clamp_pose(&pose);
+        pose[0] = rng.range(-0.4, 0.4);
+        pose[1] = rng.range(-0.1, 0.2);
+        pose[2] = rng.range(2.6, 4.0);
+        let (mut d, _) = model.render_depth(&pose, cam);
+        for z in d.iter_mut() {
+            if *z > 0.0 {
+                if rng.uniform() < 0.01 {
+                    *z = 0.0;
+                } else {
+                    *z += (0.005 * rng.normal()) as f32;
+                }
+            }
+        }
+        (d, pose)
+    }
+
+    #[test]
+    #[ignore = "evaluation: cargo test --lib templates::eval -- --ignored --nocapture"]
+    fn retrieval_accuracy() {
+        let db = database();
+        let cam = Camera::itop();
+        let mut rng = Rng(42);
+        let n = 60;
+        let (mut top1, mut top10, mut joints_ok) = (0, 0, 0);
+        let cfg = MatchConfig {
+            top_k: 10,
+            ..Default::default()
+        };
+        for _ in 0..n {
+            let t = (rng.uniform() * NUM_TEMPLATES as f64) as usize;
+            let (d, pose) = query(t, &mut rng, &cam, 0.1);
+            let view = DepthView::new(&d, cam.height, cam.width, "depth").unwrap();
+            let r = db.match_depth(&view, &cam, None, &cfg).unwrap();
+            let rank = r.candidates.iter().position(|c| c.index == t);
+            top1 += (rank == Some(0)) as usize;
+            top10 += rank.is_some() as usize;
+            let truth = db.model.joints(&pose);
+            let pck = r.candidates[0]
+                .joints
+                .iter()
+                .zip(&truth)
+                .filter(|(a, b)| (Vector3::from(**a) - *b).norm() < 0.1)
+                .count();
+            joints_ok += pck;
+            if rank != Some(0) {
+                println!(
+                    "t {t} {:?} got {} {:?} rank {rank:?} cost {:.4} vs best {:.4}",
+                    template_code(t),
+                    r.candidates[0].index,
+                    template_code(r.candidates[0].index),
+                    r.candidates
+                        .iter()
+                        .find(|c| c.index == t)
+                        .map(|c| c.cost)
+                        .unwrap_or(f64::NAN),
+                    r.candidates[0].cost
+                );
+            }
+        }
+        println!(
+            "top1 {top1}/{n} top10 {top10}/{n} pck {:.3}",
+            joints_ok as f64 / (n * NUM_JOINTS) as f64
+        );
     }
 }
