@@ -9,6 +9,7 @@ mod arrays;
 mod camera;
 mod cloud;
 mod io;
+mod templates;
 
 use crate::error::Error;
 use pyo3::create_exception;
@@ -62,5 +63,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     camera::register(m)?;
     cloud::register(m)?;
     io::register(m)?;
+    templates::register(m)?;
     Ok(())
 }
