@@ -65,6 +65,9 @@ impl Default for DescriptorConfig {
 /// Fewest sample points / silhouette pixels we describe.
 pub const MIN_SAMPLES: usize = 4;
 pub const MIN_POINTS: usize = 20;
+/// Silhouette points farther than this from the median depth (m) are not the body: a
+/// body with an arm stretched toward the camera spans well under it.
+pub const MAX_DEPTH_FROM_MEDIAN: f32 = 1.0;
 /// Refinements of the sample-grid step toward the target sample count.
 const GRID_REFINEMENTS: usize = 3;
 
@@ -396,7 +399,22 @@ impl Silhouette {
         mask: Option<&[bool]>,
         normal_radius: usize,
     ) -> Result<Self> {
-        let cloud = Cloud::from_depth(depth, camera, mask)?;
+        let mut cloud = Cloud::from_depth(depth, camera, mask)?;
+        // Masks from background subtraction or ground truth can hold a few pixels of
+        // the floor or wall behind the body: drop points far from the median depth.
+        if !cloud.is_empty() {
+            let mut z: Vec<f32> = cloud.points.iter().map(|p| p[2]).collect();
+            let mid = z.len() / 2;
+            let median = *z.select_nth_unstable_by(mid, f32::total_cmp).1;
+            let far = |p: &[f32; 3]| (p[2] - median).abs() > MAX_DEPTH_FROM_MEDIAN;
+            if cloud.points.iter().any(far) {
+                let mut keep = vec![false; depth.data.len()];
+                for (p, &i) in cloud.points.iter().zip(&cloud.pixels) {
+                    keep[i as usize] = !far(p);
+                }
+                cloud = Cloud::from_depth(depth, camera, Some(&keep))?;
+            }
+        }
         if cloud.len() < MIN_POINTS {
             return Err(Error::NoBody(format!(
                 "only {} foreground pixels with depth; at least {MIN_POINTS} are needed",

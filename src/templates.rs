@@ -1060,9 +1060,9 @@ mod tests {
         assert_eq!(db.len(), NUM_TEMPLATES);
         let model = BodyModel::default();
         let cam = Camera::itop();
-        for &t in &[0usize, 77, 300, 555, 700] {
+        for &(t, x) in &[(0usize, 0.3), (77, -0.8), (300, 0.6), (555, -0.7), (700, 0.5), (520, -0.5)] {
             let mut pose = template_pose(t, 3.0);
-            pose[0] = 0.3;
+            pose[0] = x;
             pose[1] = 0.1;
             pose[2] = 3.4;
             let (d, _) = model.render_depth(&pose, &cam);

@@ -71,7 +71,8 @@ def _model_shape(model: Any) -> Optional[np.ndarray]:
     raise InvalidInputError(f"model: expected a body model or 27 shape values, got {type(model)}")
 
 
-def _progress_bar(stream=sys.stderr) -> Callable[[int, int], None]:
+def _progress_bar() -> Callable[[int, int], None]:
+    """A one-line text progress bar on stderr."""
     start = time.perf_counter()
 
     def report(done: int, total: int) -> None:
@@ -79,8 +80,8 @@ def _progress_bar(stream=sys.stderr) -> Callable[[int, int], None]:
         filled = int(width * done / total)
         bar = "#" * filled + "-" * (width - filled)
         end = "\n" if done >= total else ""
-        stream.write(f"\rtemplates [{bar}] {done}/{total} {time.perf_counter() - start:.1f}s{end}")
-        stream.flush()
+        sys.stderr.write(f"\rtemplates [{bar}] {done}/{total} {time.perf_counter() - start:.1f}s{end}")
+        sys.stderr.flush()
 
     return report
 

@@ -216,6 +216,38 @@ impl PyTemplateDatabase {
         Ok(PyTemplateDatabase { inner: db })
     }
 
+    /// Depth image (H, W) float32 of template `index` rendered in Rust.
+    #[staticmethod]
+    #[pyo3(signature = (index, model_shape=None, *, width=96, height=96, distance=3.0,
+                        field_height=2.4, renderer="superquadric"))]
+    #[allow(clippy::too_many_arguments)]
+    fn render_template<'py>(
+        py: Python<'py>,
+        index: usize,
+        model_shape: Option<&Bound<'py, PyAny>>,
+        width: usize,
+        height: usize,
+        distance: f64,
+        field_height: f64,
+        renderer: &str,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let model = model_of(model_shape)?;
+        let d = TemplateConfig::default();
+        let cfg = config_of(
+            width,
+            height,
+            distance,
+            field_height,
+            renderer,
+            d.descriptor.samples,
+            d.descriptor.radial_bins,
+            d.descriptor.angular_bins,
+            d.descriptor.seed,
+        )?;
+        let depth = py.detach(|| crate::templates::render_template(&model, &cfg, index))?;
+        Ok(to_numpy(py, depth, &[height, width]))
+    }
+
     /// Super-quadric meshes of template `index` (all segments in one mesh, template
     /// camera frame): (vertices (V, 3) float64, faces (F, 3) int64).
     #[staticmethod]
