@@ -21,14 +21,17 @@ from ._core import (
 )
 from .cloud import PointCloud, foreground_mask, point_cloud
 from .io import read_depth, read_image, write_depth
+from .templates import Candidate, TemplateDatabase, surface_context
 
 __all__ = [
     "Camera",
+    "Candidate",
     "DepthPoseError",
     "FileFormatError",
     "InvalidInputError",
     "NoBodyError",
     "PointCloud",
+    "TemplateDatabase",
     "__version__",
     "depth_to_points",
     "foreground_mask",
@@ -37,6 +40,7 @@ __all__ = [
     "point_cloud",
     "read_depth",
     "read_image",
+    "surface_context",
     "surface_normals",
     "viz",
     "write_depth",

@@ -588,7 +588,11 @@ impl PyTemplateDatabase {
 /// Shape parameters (27,) of the default body model.
 #[pyfunction]
 fn _default_model_shape(py: Python<'_>) -> Bound<'_, PyArrayDyn<f64>> {
-    to_numpy(py, BodyModel::default().shape.to_vec().to_vec(), &[NUM_SHAPE_PARAMS])
+    to_numpy(
+        py,
+        BodyModel::default().shape.to_vec().to_vec(),
+        &[NUM_SHAPE_PARAMS],
+    )
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
