@@ -482,10 +482,29 @@ pub fn descriptor_distance(a: &[f32], b: &[f32]) -> f32 {
     squared_distance(a, b).sqrt()
 }
 
-/// Squared L2 distance (the inner loop of matching; auto-vectorised).
+/// Lanes of the distance accumulator: independent partial sums let the compiler
+/// vectorise (a single running f32 sum must stay sequential).
+const LANES: usize = 8;
+
+/// Squared L2 distance (the inner loop of matching).
 #[inline]
 pub fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
-    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f32; LANES];
+    let mut ca = a.chunks_exact(LANES);
+    let mut cb = b.chunks_exact(LANES);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for k in 0..LANES {
+            let d = x[k] - y[k];
+            acc[k] += d * d;
+        }
+    }
+    let mut total: f32 = acc.iter().sum();
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        total += (x - y) * (x - y);
+    }
+    total
 }
 
 #[cfg(test)]
@@ -631,6 +650,20 @@ mod tests {
             "scale change moved descriptors by {same} of {typical}"
         );
         assert!(diff > 1.5 * same, "same {same} other pose {diff}");
+    }
+
+    #[test]
+    fn squared_distance_is_exact() {
+        for n in [0usize, 3, 8, 13, 180] {
+            let a: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
+            let b: Vec<f32> = (0..n).map(|i| (i as f32 * 0.11).cos()).collect();
+            let want: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| ((x - y) as f64).powi(2))
+                .sum();
+            assert!((squared_distance(&a, &b) as f64 - want).abs() < 1e-4 * (1.0 + want));
+        }
     }
 
     #[test]

@@ -324,8 +324,8 @@ impl Default for MatchConfig {
     fn default() -> Self {
         MatchConfig {
             top_k: 5,
-            shortlist: 24,
-            representatives: 16,
+            shortlist: 16,
+            representatives: 8,
             location_weight: 0.1,
             dummy_cost: 0.15,
         }
@@ -925,8 +925,9 @@ fn representatives(query: &SurfaceContext, count: usize) -> Vec<usize> {
             .max_by(|&a, &b| nearest[a].total_cmp(&nearest[b]).then(b.cmp(&a)))
             .unwrap_or(0);
         chosen.push(next);
-        for i in 0..n {
-            nearest[i] = nearest[i].min(d2(query.positions[i], query.positions[next]));
+        let pn = query.positions[next];
+        for (d, p) in nearest.iter_mut().zip(&query.positions) {
+            *d = d.min(d2(*p, pn));
         }
     }
     chosen

@@ -157,8 +157,8 @@ class _TemplateDatabase:
         mask: npt.NDArray[np.bool_] | None = None,
         *,
         top_k: int = 5,
-        shortlist: int = 24,
-        representatives: int = 16,
+        shortlist: int = 16,
+        representatives: int = 8,
         location_weight: float = 0.1,
         dummy_cost: float = 0.15,
     ) -> tuple[list[dict[str, Any]], list[int]]: ...

@@ -154,7 +154,7 @@ class TemplateDatabase:
         return cls(native)
 
     def match(self, depth: np.ndarray, camera: Camera, mask: Optional[np.ndarray] = None,
-              top_k: int = 5, *, shortlist: int = 24, representatives: int = 16,
+              top_k: int = 5, *, shortlist: int = 16, representatives: int = 8,
               location_weight: float = 0.1, dummy_cost: float = 0.15) -> list[Candidate]:
         """Best ``top_k`` templates for the body in ``depth`` (H, W) float32 metres, each
         with its pose placed at the observed body."""

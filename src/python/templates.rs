@@ -71,6 +71,9 @@ fn config_of(
     Ok(c)
 }
 
+/// (vertices, faces) of a mesh.
+type MeshArrays<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>);
+
 /// Surface-context descriptors of the (masked) body in `depth`: (descriptors (N, 3·bins)
 /// float32, sample pixels (N, 2) float32 as [u, v], normalised positions (N, 2)).
 #[pyfunction]
@@ -259,7 +262,7 @@ impl PyTemplateDatabase {
         distance: f64,
         rings: usize,
         sectors: usize,
-    ) -> PyResult<(Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>)> {
+    ) -> PyResult<MeshArrays<'py>> {
         if index >= NUM_TEMPLATES {
             return Err(
                 Error::invalid("index", format!("must be < {NUM_TEMPLATES}, got {index}")).into(),
@@ -284,7 +287,7 @@ impl PyTemplateDatabase {
     /// Matches the body in `depth` (H, W) metres; candidates best first, as dicts with
     /// index, view, pose (22,), joints (15, 3), cost, prune_cost, scale; and the short
     /// list of the pruning stage.
-    #[pyo3(signature = (depth, camera, mask=None, *, top_k=5, shortlist=24, representatives=16,
+    #[pyo3(signature = (depth, camera, mask=None, *, top_k=5, shortlist=16, representatives=8,
                         location_weight=0.1, dummy_cost=0.15))]
     #[allow(clippy::too_many_arguments)]
     fn match_depth<'py>(
@@ -341,6 +344,7 @@ impl PyTemplateDatabase {
     /// Exact matching costs of the body in `depth` against the given templates (no
     /// pruning): for measuring the pruning stage.
     #[pyo3(signature = (depth, camera, indices, mask=None, *, location_weight=0.1, dummy_cost=0.15))]
+    #[allow(clippy::too_many_arguments)]
     fn exact_costs(
         &self,
         py: Python<'_>,
