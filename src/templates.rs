@@ -942,12 +942,38 @@ fn pair_cost(q: &SurfaceContext, i: usize, t: &SurfaceContext, j: usize, lw: f32
 }
 
 /// Pruning score: mean over representatives of the cost of their nearest template sample.
+///
+/// Exact, but pruned: the template sample nearest in position is tried first (usually
+/// the best, giving a tight bound), a sample whose position term alone exceeds the best
+/// cost is skipped, and the square root is taken only for samples that improve it.
 fn prune_score(q: &SurfaceContext, reps: &[usize], t: &SurfaceContext, lw: f32) -> f32 {
     let mut total = 0.0;
     for &i in reps {
-        let mut best = f32::INFINITY;
+        let pi = q.positions[i];
+        let loc = |j: usize| {
+            let pj = t.positions[j];
+            lw * (pi[0] - pj[0]).hypot(pi[1] - pj[1])
+        };
+        let nearest = (0..t.len())
+            .min_by(|&a, &b| {
+                let (pa, pb) = (t.positions[a], t.positions[b]);
+                let da = (pi[0] - pa[0]).powi(2) + (pi[1] - pa[1]).powi(2);
+                let db = (pi[0] - pb[0]).powi(2) + (pi[1] - pb[1]).powi(2);
+                da.total_cmp(&db)
+            })
+            .unwrap_or(0);
+        let mut best = pair_cost(q, i, t, nearest, lw);
+        let qd = q.descriptor(i);
         for j in 0..t.len() {
-            best = best.min(pair_cost(q, i, t, j, lw));
+            let l = loc(j);
+            if l >= best {
+                continue;
+            }
+            let bound = (best - l) * (best - l);
+            let d2 = crate::descriptor::squared_distance(qd, t.descriptor(j));
+            if d2 < bound {
+                best = best.min(d2.sqrt() + l);
+            }
         }
         total += best;
     }
@@ -1124,6 +1150,32 @@ mod tests {
             config_from_vec(&config_to_vec(&db.config)).unwrap(),
             db.config
         );
+    }
+
+    #[test]
+    fn pruned_score_equals_brute_force() {
+        let db = super::eval::database();
+        let q = &db.templates[123].context;
+        let reps = representatives(q, 8);
+        for t in [0usize, 123, 400, 767] {
+            let tc = &db.templates[t].context;
+            for lw in [0.0f32, 0.1, 1.0] {
+                let brute: f32 = reps
+                    .iter()
+                    .map(|&i| {
+                        (0..tc.len())
+                            .map(|j| pair_cost(q, i, tc, j, lw))
+                            .fold(f32::INFINITY, f32::min)
+                    })
+                    .sum::<f32>()
+                    / reps.len() as f32;
+                let fast = prune_score(q, &reps, tc, lw);
+                assert!(
+                    (fast - brute).abs() <= 1e-5 * (1.0 + brute),
+                    "{fast} vs {brute}"
+                );
+            }
+        }
     }
 
     #[test]
