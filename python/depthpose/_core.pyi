@@ -35,7 +35,10 @@ class BodyModel:
     def joints(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
     def joints_jacobian(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
     def distances(
-        self, points: npt.NDArray[np.floating], pose: npt.NDArray[np.float64]
+        self,
+        points: npt.NDArray[np.floating],
+        pose: npt.NDArray[np.float64],
+        cap: float | None = None,
     ) -> npt.NDArray[np.float32]: ...
     def residuals_and_jacobian(
         self,
