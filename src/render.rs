@@ -281,10 +281,9 @@ mod tests {
             .min()
             .unwrap();
         assert!(head_row < 60);
-        let mut small = vec![0.0; 10];
+        let (mut small, mut small_labels) = ([0.0f32; 10], [0i16; 10]);
         assert!(model
-            .render_depth_into(&pose, &cam, &mut small, &mut vec![0; 10])
+            .render_depth_into(&pose, &cam, &mut small, &mut small_labels)
             .is_err());
-        small.clear();
     }
 }

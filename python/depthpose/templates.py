@@ -12,7 +12,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Optional, Union
+from typing import Any, Callable
 
 import numpy as np
 
@@ -56,7 +56,7 @@ class Candidate:
                 LEG_POSES[rest % 4], VIEWS[self.index // 256])
 
 
-def _model_shape(model: Any) -> Optional[np.ndarray]:
+def _model_shape(model: Any) -> np.ndarray | None:
     """The 27 shape parameters of ``model``: None (default model), an array, or an
     object with ``shape`` / ``shape_vector()``."""
     if model is None:
@@ -80,14 +80,15 @@ def _progress_bar() -> Callable[[int, int], None]:
         filled = int(width * done / total)
         bar = "#" * filled + "-" * (width - filled)
         end = "\n" if done >= total else ""
-        sys.stderr.write(f"\rtemplates [{bar}] {done}/{total} {time.perf_counter() - start:.1f}s{end}")
+        elapsed = time.perf_counter() - start
+        sys.stderr.write(f"\rtemplates [{bar}] {done}/{total} {elapsed:.1f}s{end}")
         sys.stderr.flush()
 
     return report
 
 
-def _raycast_depths(shape: Optional[np.ndarray], camera: Camera, distance: float,
-                    progress: Optional[Callable[[int, int], None]]) -> np.ndarray:
+def _raycast_depths(shape: np.ndarray | None, camera: Camera, distance: float,
+                    progress: Callable[[int, int], None] | None) -> np.ndarray:
     """Template depth images by trimesh ray casting of the super-quadric meshes (embree
     when ``embreex`` is installed, trimesh's own triangle intersector otherwise)."""
     import trimesh
@@ -119,10 +120,10 @@ class TemplateDatabase:
         self._db = native
 
     @classmethod
-    def build(cls, model: Any = None, camera: Optional[Camera] = None, *, width: int = 96,
+    def build(cls, model: Any = None, camera: Camera | None = None, *, width: int = 96,
               height: int = 96, distance: float = 3.0, field_height: float = 2.4,
               renderer: str = "superquadric", samples: int = 100, radial_bins: int = 5,
-              angular_bins: int = 12, seed: int = 0, progress: bool = True) -> "TemplateDatabase":
+              angular_bins: int = 12, seed: int = 0, progress: bool = True) -> TemplateDatabase:
         """Renders and describes the 768 templates.
 
         ``renderer``: "superquadric" (Rust rasteriser of the eq. 1 meshes, the default),
@@ -153,7 +154,7 @@ class TemplateDatabase:
                 angular_bins=angular_bins, seed=seed, progress=report)
         return cls(native)
 
-    def match(self, depth: np.ndarray, camera: Camera, mask: Optional[np.ndarray] = None,
+    def match(self, depth: np.ndarray, camera: Camera, mask: np.ndarray | None = None,
               top_k: int = 5, *, shortlist: int = 16, representatives: int = 8,
               location_weight: float = 0.1, dummy_cost: float = 0.15) -> list[Candidate]:
         """Best ``top_k`` templates for the body in ``depth`` (H, W) float32 metres, each
@@ -165,20 +166,20 @@ class TemplateDatabase:
         return [Candidate(**c) for c in found]
 
     def match_with_shortlist(self, depth: np.ndarray, camera: Camera,
-                             mask: Optional[np.ndarray] = None, top_k: int = 5,
+                             mask: np.ndarray | None = None, top_k: int = 5,
                              **kwargs: Any) -> tuple[list[Candidate], list[int]]:
         """Like :meth:`match`, also returning the pruning stage's short list."""
         found, short = self._db.match_depth(depth, camera, mask, top_k=top_k, **kwargs)
         return [Candidate(**c) for c in found], list(short)
 
     def exact_costs(self, depth: np.ndarray, camera: Camera, indices: list[int],
-                    mask: Optional[np.ndarray] = None) -> np.ndarray:
+                    mask: np.ndarray | None = None) -> np.ndarray:
         """Exact assignment costs against the given templates, without pruning."""
         return np.asarray(self._db.exact_costs(depth, camera, list(indices), mask))
 
     # -- persistence -----------------------------------------------------------------
 
-    def save(self, path: Union[str, os.PathLike]) -> None:
+    def save(self, path: str | os.PathLike) -> None:
         """Writes the database to an ``.npz`` file (format version and settings hash
         included)."""
         arrays = self._db.to_arrays()
@@ -190,8 +191,8 @@ class TemplateDatabase:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path: Union[str, os.PathLike], model: Any = None,
-             **settings: Any) -> "TemplateDatabase":
+    def load(cls, path: str | os.PathLike, model: Any = None,
+             **settings: Any) -> TemplateDatabase:
         """Reads a database written by :meth:`save`. With ``model`` or settings given,
         refuses a file built for another model or other settings; a file of another
         format version or a corrupt file raises :class:`FileFormatError`."""
@@ -223,7 +224,7 @@ class TemplateDatabase:
         return cls(_core._TemplateDatabase.from_arrays(arrays, str(path), shape, cfg))
 
     @classmethod
-    def default(cls, *, progress: bool = True) -> "TemplateDatabase":
+    def default(cls, *, progress: bool = True) -> TemplateDatabase:
         """The database of the default model and settings, cached under
         ``$DEPTHPOSE_CACHE`` (or ``~/.cache/depthpose``) and built on first use."""
         root = Path(os.environ.get("DEPTHPOSE_CACHE", Path.home() / ".cache" / "depthpose"))

@@ -14,8 +14,12 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-/// Newton/bisection stops when the step is below this relative size.
-const ROOT_TOLERANCE: f64 = 4.0 * f64::EPSILON;
+/// Newton/bisection stops when the step is below this relative size: Newton converges
+/// quadratically, so after a step of 1e-9 the error is at rounding level. (Asking for
+/// steps of a few ulps makes the iteration chase rounding noise in H.)
+const ROOT_TOLERANCE: f64 = 1e-9;
+/// |H| below this is a root to rounding precision.
+const H_TOLERANCE: f64 = 4.0 * f64::EPSILON;
 /// Iteration cap; bisection alone halves the bracket each step, so 2 × 64 suffices.
 const MAX_ITERATIONS: usize = 128;
 
@@ -40,15 +44,16 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
         let mut s = 0.0;
         let mut ds = 0.0;
         for k in 0..N {
-            let q = a[k] / (u + b[k]);
+            let inv = 1.0 / (u + b[k]);
+            let q = a[k] * inv;
             let q2 = q * q;
             s += q2;
-            ds += q2 / (u + b[k]);
+            ds += q2 * inv;
         }
         // H = S^{-1/2} − 1 (increasing), H' = −S' / (2 S^{3/2}) with S' = −2·ds.
         let inv_sqrt = 1.0 / s.sqrt();
         let h = inv_sqrt - 1.0;
-        if h == 0.0 {
+        if h.abs() <= H_TOLERANCE {
             return u;
         }
         if h < 0.0 {
@@ -61,7 +66,7 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
         if !(next > lo && next < hi) {
             next = 0.5 * (lo + hi);
         }
-        if (next - u).abs() <= ROOT_TOLERANCE * u.abs() || hi - lo <= ROOT_TOLERANCE * hi {
+        if (next - u).abs() <= ROOT_TOLERANCE * u.abs() || hi - lo <= H_TOLERANCE * hi {
             return next;
         }
         u = next;
@@ -98,12 +103,34 @@ fn closest_2d(e: [f64; 2], y: [f64; 2]) -> [f64; 2] {
     }
 }
 
+/// Constants of a sorted ellipsoid reused by every query.
+#[derive(Debug, Clone, Copy)]
+struct Sorted {
+    /// Half-axes, descending.
+    e: [f64; 3],
+    /// 1 / e_k.
+    inv_e: [f64; 3],
+    /// r_k = (e_k / e2)².
+    r: [f64; 3],
+}
+
+impl Sorted {
+    fn new(e: [f64; 3]) -> Self {
+        Sorted {
+            e,
+            inv_e: [1.0 / e[0], 1.0 / e[1], 1.0 / e[2]],
+            r: [(e[0] / e[2]).powi(2), (e[1] / e[2]).powi(2), 1.0],
+        }
+    }
+}
+
 /// Closest point for sorted axes e0 ≥ e1 ≥ e2 > 0, y ≥ 0.
 #[inline]
-fn closest_sorted(e: [f64; 3], y: [f64; 3]) -> [f64; 3] {
+fn closest_sorted(c: &Sorted, y: [f64; 3]) -> [f64; 3] {
+    let e = c.e;
     if y[2] > 0.0 {
-        let z = [y[0] / e[0], y[1] / e[1], y[2] / e[2]];
-        let r = [(e[0] / e[2]).powi(2), (e[1] / e[2]).powi(2), 1.0];
+        let r = c.r;
+        let z = [y[0] * c.inv_e[0], y[1] * c.inv_e[1], y[2] * c.inv_e[2]];
         let a = [r[0] * z[0], r[1] * z[1], z[2]];
         let b = [r[0] - 1.0, r[1] - 1.0, 0.0];
         let mut lo = z[2];
@@ -154,7 +181,9 @@ pub fn signed_distance_to_ellipsoid(radii: &Vector3<f64>, y: &Vector3<f64>) -> f
 pub struct Prepared {
     /// perm[k] = original axis of sorted axis k (descending half-axes).
     perm: [usize; 3],
-    sorted: [f64; 3],
+    sorted: Sorted,
+    /// 1 / e_k² in sorted order.
+    inv_e2: [f64; 3],
     radii: Vector3<f64>,
 }
 
@@ -162,9 +191,15 @@ impl Prepared {
     pub fn new(radii: &Vector3<f64>) -> Self {
         let mut perm = [0usize, 1, 2];
         perm.sort_by(|&i, &j| radii[j].total_cmp(&radii[i]));
+        let e = [radii[perm[0]], radii[perm[1]], radii[perm[2]]];
         Prepared {
             perm,
-            sorted: [radii[perm[0]], radii[perm[1]], radii[perm[2]]],
+            sorted: Sorted::new(e),
+            inv_e2: [
+                1.0 / (e[0] * e[0]),
+                1.0 / (e[1] * e[1]),
+                1.0 / (e[2] * e[2]),
+            ],
             radii: *radii,
         }
     }
@@ -177,7 +212,7 @@ impl Prepared {
             y[self.perm[1]].abs(),
             y[self.perm[2]].abs(),
         ];
-        let xs = closest_sorted(self.sorted, ys);
+        let xs = closest_sorted(&self.sorted, ys);
         let mut closest = Vector3::zeros();
         let mut grad = Vector3::zeros();
         let mut level = 0.0;
@@ -185,9 +220,8 @@ impl Prepared {
             let axis = self.perm[k];
             let x = xs[k].copysign(y[axis]);
             closest[axis] = x;
-            let e2 = self.sorted[k] * self.sorted[k];
-            grad[axis] = x / e2;
-            level += ys[k] * ys[k] / e2;
+            grad[axis] = x * self.inv_e2[k];
+            level += ys[k] * ys[k] * self.inv_e2[k];
         }
         let dist = (y - closest).norm();
         let distance = if level < 1.0 { -dist } else { dist };

@@ -451,6 +451,19 @@ const NECK_BOTTOM: f64 = 0.5;
 /// joint (the rig's head-bone midpoint is 7.7 cm under the crown at 1.75 m, less than
 /// the head's half-height).
 const HEAD_ELLIPSOID_DROP: f64 = 0.3;
+/// Forward (−z) shift of the trunk and head ellipsoids from the joint line, as a
+/// fraction of their front-back half-axis: the joints of the realistic body (spine,
+/// head bone) sit toward the back of the trunk and head. Measured on the shared
+/// synthetic sequences (front views: model surface 3–6 cm behind the real chest, belly
+/// and face without it).
+const TORSO_FORWARD: f64 = 0.3;
+const PELVIS_FORWARD: f64 = 0.25;
+const NECK_FORWARD: f64 = 0.2;
+const HEAD_FORWARD: f64 = 0.5;
+/// Same for the legs, as a fraction of the limb radius: the thigh's bulk lies in front
+/// of the hip–knee line, the calf behind the knee–ankle line.
+const THIGH_FORWARD: f64 = 0.25;
+const SHIN_FORWARD: f64 = -0.35;
 /// Hand thickness relative to its breadth; foot height relative to ankle height.
 const HAND_THICKNESS: f64 = 0.5;
 const FOOT_HEIGHT: f64 = 0.55;
@@ -465,13 +478,22 @@ impl BodyShape {
             centre: Vector3::from(c),
             radii: Vector3::from(r),
         };
-        let limb = |len: f64, r: f64| e([0.0, 0.5 * len, 0.0], [r, (0.5 + LIMB_OVERHANG) * len, r]);
+        let limb = |len: f64, r: f64, forward: f64| {
+            e(
+                [0.0, 0.5 * len, -forward * r],
+                [r, (0.5 + LIMB_OVERHANG) * len, r],
+            )
+        };
         let l = self.torso_length;
         // Torso frame origin: mid-spine, spine_offset above the hip centre.
         let torso_lo = -TORSO_BOTTOM * l + self.spine_offset;
         let torso_hi = -TORSO_TOP * l + self.spine_offset;
         let torso = e(
-            [0.0, 0.5 * (torso_lo + torso_hi), 0.0],
+            [
+                0.0,
+                0.5 * (torso_lo + torso_hi),
+                -TORSO_FORWARD * self.chest_radius_z,
+            ],
             [
                 self.chest_radius_x,
                 0.5 * (torso_lo - torso_hi),
@@ -479,7 +501,11 @@ impl BodyShape {
             ],
         );
         let pelvis = e(
-            [0.0, 0.5 * (PELVIS_BOTTOM - PELVIS_TOP) * l, 0.0],
+            [
+                0.0,
+                0.5 * (PELVIS_BOTTOM - PELVIS_TOP) * l,
+                -PELVIS_FORWARD * self.pelvis_radius_z,
+            ],
             [
                 self.pelvis_radius_x,
                 0.5 * (PELVIS_BOTTOM + PELVIS_TOP) * l,
@@ -490,7 +516,11 @@ impl BodyShape {
         let neck_lo = NECK_BOTTOM * self.neck_length;
         let neck_hi = -(self.head_offset - HEAD_ELLIPSOID_DROP * self.head_radius_y);
         let neck = e(
-            [0.0, 0.5 * (neck_lo + neck_hi), 0.0],
+            [
+                0.0,
+                0.5 * (neck_lo + neck_hi),
+                -NECK_FORWARD * self.neck_radius,
+            ],
             [
                 self.neck_radius,
                 0.5 * (neck_lo - neck_hi),
@@ -498,7 +528,11 @@ impl BodyShape {
             ],
         );
         let head = e(
-            [0.0, HEAD_ELLIPSOID_DROP * self.head_radius_y, 0.0],
+            [
+                0.0,
+                HEAD_ELLIPSOID_DROP * self.head_radius_y,
+                -HEAD_FORWARD * self.head_radius_z,
+            ],
             [self.head_radius_x, self.head_radius_y, self.head_radius_z],
         );
         let hand = e(
@@ -518,10 +552,10 @@ impl BodyShape {
             ],
             [self.foot_radius, foot_h, 0.5 * self.foot_length],
         );
-        let upper_arm = limb(self.upper_arm_length, self.upper_arm_radius);
-        let forearm = limb(self.forearm_length, self.forearm_radius);
-        let thigh = limb(self.thigh_length, self.thigh_radius);
-        let shin = limb(self.shin_length, self.shin_radius);
+        let upper_arm = limb(self.upper_arm_length, self.upper_arm_radius, 0.0);
+        let forearm = limb(self.forearm_length, self.forearm_radius, 0.0);
+        let thigh = limb(self.thigh_length, self.thigh_radius, THIGH_FORWARD);
+        let shin = limb(self.shin_length, self.shin_radius, SHIN_FORWARD);
         [
             head, neck, torso, pelvis, upper_arm, forearm, hand, upper_arm, forearm, hand, thigh,
             shin, foot, thigh, shin, foot,
@@ -530,17 +564,9 @@ impl BodyShape {
 }
 
 /// The body model: a shape plus the fixed skeleton topology.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct BodyModel {
     pub shape: BodyShape,
-}
-
-impl Default for BodyModel {
-    fn default() -> Self {
-        BodyModel {
-            shape: BodyShape::default(),
-        }
-    }
 }
 
 impl BodyModel {

@@ -6,6 +6,7 @@
 //! `py.detach` around the real work and returns owned arrays. One file per stage.
 
 mod arrays;
+mod body;
 mod camera;
 mod cloud;
 mod io;
@@ -61,6 +62,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("NoBodyError", py.get_type::<NoBodyError>())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     camera::register(m)?;
+    body::register(m)?;
     cloud::register(m)?;
     io::register(m)?;
     templates::register(m)?;

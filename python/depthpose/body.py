@@ -1,0 +1,47 @@
+"""The articulated body model (16 ellipsoid segments, 22 pose parameters).
+
+`BodyModel` is the native class; this module adds trimesh conveniences. Frames and
+parameters: the body frame sits at the hip centre with x = the subject's left, y = down,
+z = the subject's back; the neutral pose (zero root rotation) faces the camera. Pose
+order: root translation (3), root rotation vector (3), neck (2), right shoulder (3),
+right elbow, left shoulder (3), left elbow, right hip (2), right knee, left hip (2),
+left knee. Jacobian columns 3..6 are body-frame rotation increments (R <- R exp([w]x));
+apply a step with `BodyModel.pose_with_root_increment`.
+"""
+
+from __future__ import annotations
+
+from typing import Any, List
+
+import numpy as np
+
+from depthpose._core import BodyModel
+
+__all__ = ["BodyModel", "body_trimesh", "ellipsoid_trimeshes"]
+
+
+def body_trimesh(model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: int = 24) -> Any:
+    """All super-quadric segment meshes of `pose` joined into one `trimesh.Trimesh`
+    (camera frame); `face_attributes['part']` holds each face's segment label."""
+    import trimesh
+
+    parts = model.superquadric_meshes(pose, rings, sectors)
+    meshes = [trimesh.Trimesh(v, f, process=False) for v, f in parts]
+    labels = np.concatenate([np.full(len(f), k, np.int16) for k, (_, f) in enumerate(parts)])
+    joined = trimesh.util.concatenate(meshes)
+    joined.face_attributes["part"] = labels
+    return joined
+
+
+def ellipsoid_trimeshes(model: BodyModel, pose: np.ndarray, subdivisions: int = 4) -> List[Any]:
+    """The fitting ellipsoids of `pose` as `trimesh` icospheres scaled and placed in the
+    camera frame (one per segment, label order)."""
+    import trimesh
+
+    centres, rotations, radii = model.ellipsoids(pose)
+    out = []
+    for c, r, e in zip(centres, rotations, radii):
+        sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
+        v = (sphere.vertices * e) @ r.T + c
+        out.append(trimesh.Trimesh(v, sphere.faces, process=False))
+    return out
