@@ -47,6 +47,12 @@ fn bench_body(c: &mut Criterion) {
             black_box(out[0])
         })
     });
+    c.bench_function("body_distances_capped_0.3m_10k_points_x16", |b| {
+        b.iter(|| {
+            model.distances_capped(&pts, &pose, 0.3, &mut out).unwrap();
+            black_box(out[0])
+        })
+    });
     let (mut res, mut jac) = (vec![0.0; pts.len()], vec![0.0; pts.len() * NUM_PARAMS]);
     c.bench_function("body_residuals_jacobian_10k_points", |b| {
         b.iter(|| {

@@ -5,15 +5,18 @@
 //! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
 //! [`python`] behind the `python` feature; algorithms never live there.
 
+pub mod assignment;
 pub mod body;
 pub mod camera;
 pub mod cloud;
+pub mod descriptor;
 pub mod error;
 pub mod fit;
 pub mod graphcut;
 pub mod io;
 pub mod stereo;
 pub mod render;
+pub mod templates;
 
 #[cfg(feature = "python")]
 mod python;

@@ -219,3 +219,16 @@ def test_superquadric_meshes():
 
 def test_exported_from_package():
     assert depthpose.BodyModel is BodyModel
+
+
+def test_capped_distances_are_exact_below_the_cap():
+    m = BodyModel()
+    pose = m.neutral_pose()
+    pts = np.random.default_rng(0).normal(size=(300, 3)) * 0.4 + [0, 0, 3]
+    exact = m.distances(pts, pose)
+    capped = m.distances(pts, pose, cap=0.2)
+    below = capped < 0.2
+    assert np.array_equal(capped[below], exact[below])
+    assert np.all(exact[~below] >= 0.2 - 1e-6) and np.all(capped[~below] <= exact[~below] + 1e-6)
+    with pytest.raises(InvalidInputError, match="cap"):
+        m.distances(pts, pose, cap=-1.0)

@@ -22,9 +22,11 @@ from ._core import (
 from .cloud import PointCloud, foreground_mask, point_cloud
 from .fit import FitConfig, FitResult, fit_pose, pose_from_joints
 from .io import read_depth, read_image, write_depth
+from .templates import Candidate, TemplateDatabase, surface_context
 
 __all__ = [
     "Camera",
+    "Candidate",
     "DepthPoseError",
     "FileFormatError",
     "FitConfig",
@@ -32,6 +34,7 @@ __all__ = [
     "InvalidInputError",
     "NoBodyError",
     "PointCloud",
+    "TemplateDatabase",
     "__version__",
     "depth_to_points",
     "fit_pose",
@@ -42,6 +45,7 @@ __all__ = [
     "pose_from_joints",
     "read_depth",
     "read_image",
+    "surface_context",
     "surface_normals",
     "viz",
     "write_depth",

@@ -1,6 +1,6 @@
 # Type stubs for the native module depthpose._core (checked by tests/test_stub.py).
 from os import PathLike
-from typing import List, Tuple
+from typing import Any, Callable, List, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -87,6 +87,128 @@ def write_depth_png(
 ) -> None: ...
 def write_rgb_png(path: str | PathLike[str], rgb: npt.NDArray[np.uint8]) -> None: ...
 
+# ---- templates ----------------------------------------------------------------------
+def surface_context(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    mask: npt.NDArray[np.bool_] | None = None,
+    *,
+    samples: int = 100,
+    radial_bins: int = 5,
+    angular_bins: int = 12,
+    seed: int = 0,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+def _default_model_shape() -> npt.NDArray[np.float64]: ...
+
+class _TemplateDatabase:
+    @staticmethod
+    def build(
+        model_shape: npt.NDArray[np.float64] | None = None,
+        *,
+        width: int = 96,
+        height: int = 96,
+        distance: float = 3.0,
+        field_height: float = 2.4,
+        renderer: str = "superquadric",
+        samples: int = 100,
+        radial_bins: int = 5,
+        angular_bins: int = 12,
+        seed: int = 0,
+        progress: Callable[[int, int], object] | None = None,
+    ) -> _TemplateDatabase: ...
+    @staticmethod
+    def from_depths(
+        depths: npt.NDArray[np.generic],
+        model_shape: npt.NDArray[np.float64] | None = None,
+        *,
+        width: int = 96,
+        height: int = 96,
+        distance: float = 3.0,
+        field_height: float = 2.4,
+        samples: int = 100,
+        radial_bins: int = 5,
+        angular_bins: int = 12,
+        seed: int = 0,
+    ) -> _TemplateDatabase: ...
+    @staticmethod
+    def render_template(
+        index: int,
+        model_shape: npt.NDArray[np.float64] | None = None,
+        *,
+        width: int = 96,
+        height: int = 96,
+        distance: float = 3.0,
+        field_height: float = 2.4,
+        renderer: str = "superquadric",
+    ) -> npt.NDArray[np.float32]: ...
+    @staticmethod
+    def template_mesh(
+        index: int,
+        model_shape: npt.NDArray[np.float64] | None = None,
+        *,
+        distance: float = 3.0,
+        rings: int = 16,
+        sectors: int = 20,
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]: ...
+    def match_depth(
+        self,
+        depth: npt.NDArray[np.generic],
+        camera: Camera,
+        mask: npt.NDArray[np.bool_] | None = None,
+        *,
+        top_k: int = 5,
+        shortlist: int = 16,
+        representatives: int = 8,
+        location_weight: float = 0.1,
+        dummy_cost: float = 0.15,
+    ) -> tuple[list[dict[str, Any]], list[int]]: ...
+    def exact_costs(
+        self,
+        depth: npt.NDArray[np.generic],
+        camera: Camera,
+        indices: list[int],
+        mask: npt.NDArray[np.bool_] | None = None,
+        *,
+        location_weight: float = 0.1,
+        dummy_cost: float = 0.15,
+    ) -> list[float]: ...
+    def to_arrays(self) -> dict[str, Any]: ...
+    @staticmethod
+    def from_arrays(
+        arrays: dict[str, Any],
+        source: str,
+        model_shape: npt.NDArray[np.float64] | None = None,
+        config: npt.NDArray[np.float64] | None = None,
+    ) -> _TemplateDatabase: ...
+    @staticmethod
+    def settings(
+        model_shape: npt.NDArray[np.float64] | None = None,
+        *,
+        width: int = 96,
+        height: int = 96,
+        distance: float = 3.0,
+        field_height: float = 2.4,
+        renderer: str = "superquadric",
+        samples: int = 100,
+        radial_bins: int = 5,
+        angular_bins: int = 12,
+        seed: int = 0,
+    ) -> tuple[str, npt.NDArray[np.float64]]: ...
+    @property
+    def hash(self) -> str: ...
+    @property
+    def model_shape(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def poses(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def joints(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def views(self) -> list[int]: ...
+    @property
+    def camera(self) -> Camera: ...
+    def __len__(self) -> int: ...
+
+# ---- body ---------------------------------------------------------------------------
 class BodyModel:
     def __init__(self, height: float = 1.75) -> None: ...
     @property
@@ -117,7 +239,10 @@ class BodyModel:
     def joints(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
     def joints_jacobian(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
     def distances(
-        self, points: npt.NDArray[np.floating], pose: npt.NDArray[np.float64]
+        self,
+        points: npt.NDArray[np.floating],
+        pose: npt.NDArray[np.float64],
+        cap: float | None = None,
     ) -> npt.NDArray[np.float32]: ...
     def residuals_and_jacobian(
         self,

@@ -59,6 +59,55 @@ impl BodyModel {
         Ok(())
     }
 
+    /// Like [`BodyModel::distances`], but exact only where it matters for truncated
+    /// costs: when a cheap lower bound (distance to the ellipsoid's bounding sphere)
+    /// already reaches `cap`, that bound is written instead of the exact distance. So
+    /// every value below `cap` is exact and every value ≥ `cap` means "at least `cap`".
+    /// Much faster when most points are far from most segments.
+    pub fn distances_capped(
+        &self,
+        points: &[[f32; 3]],
+        pose: &Pose,
+        cap: f64,
+        out: &mut [f32],
+    ) -> Result<()> {
+        if cap.is_nan() || cap <= 0.0 {
+            return Err(Error::invalid(
+                "cap",
+                format!("must be positive, got {cap}"),
+            ));
+        }
+        if out.len() != points.len() * NUM_SEGMENTS {
+            return Err(Error::invalid(
+                "out",
+                format!(
+                    "needs {} values for {} points, got {}",
+                    points.len() * NUM_SEGMENTS,
+                    points.len(),
+                    out.len()
+                ),
+            ));
+        }
+        let (_, placed) = self.placed(pose);
+        let bound: [f64; NUM_SEGMENTS] = std::array::from_fn(|k| placed[k].prepared.radii().max());
+        out.par_chunks_mut(CHUNK_POINTS * NUM_SEGMENTS)
+            .zip(points.par_chunks(CHUNK_POINTS))
+            .for_each(|(o, pts)| {
+                for (row, p) in o.chunks_exact_mut(NUM_SEGMENTS).zip(pts) {
+                    let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                    for ((d, e), r) in row.iter_mut().zip(&placed).zip(&bound) {
+                        let lower = (p - e.centre).norm() - r;
+                        *d = if lower >= cap {
+                            lower as f32
+                        } else {
+                            e.signed_distance(&p) as f32
+                        };
+                    }
+                }
+            });
+        Ok(())
+    }
+
     /// Residuals and Jacobian of the fit: for a point with label k ≥ 0 the residual is
     /// its signed distance to segment k's ellipsoid and its Jacobian row is
     /// d(residual)/d(pose) (22 columns; root rotation columns with respect to the
@@ -181,6 +230,20 @@ mod tests {
             }
         }
         assert!(m.distances(&pts, &pose, &mut out[1..]).is_err());
+        // Capped: exact below the cap, a valid lower bound at or above it.
+        let mut capped = vec![0.0f32; out.len()];
+        m.distances_capped(&pts, &pose, 0.1, &mut capped).unwrap();
+        let mut n_capped = 0;
+        for (c, e) in capped.iter().zip(&out) {
+            if *c < 0.1 {
+                assert_eq!(c, e);
+            } else {
+                n_capped += (c != e) as usize;
+                assert!(*c >= 0.1 && *c <= *e + 1e-6);
+            }
+        }
+        assert!(n_capped > 0);
+        assert!(m.distances_capped(&pts, &pose, 0.0, &mut capped).is_err());
     }
 
     #[test]

@@ -184,19 +184,25 @@ impl PyBodyModel {
     }
 
     /// Signed distances (N, 16) float32 of points (N, 3) to every segment ellipsoid
-    /// (negative inside).
+    /// (negative inside). With `cap`, values are exact below `cap` and only a lower
+    /// bound (>= cap) above it, which is much faster.
+    #[pyo3(signature = (points, pose, cap=None))]
     fn distances<'py>(
         &self,
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
         pose: &Bound<'py, PyAny>,
+        cap: Option<f64>,
     ) -> PyResult<F32Array<'py>> {
         let pts = points_arg(points)?;
         let p = pose_arg(pose, "pose")?;
         let n = pts.len();
         let out = py.detach(|| -> crate::Result<Vec<f32>> {
             let mut out = vec![0.0f32; n * NUM_SEGMENTS];
-            self.inner.distances(&pts, &p, &mut out)?;
+            match cap {
+                Some(c) => self.inner.distances_capped(&pts, &p, c, &mut out)?,
+                None => self.inner.distances(&pts, &p, &mut out)?,
+            }
             Ok(out)
         })?;
         Ok(to_numpy(py, out, &[n, NUM_SEGMENTS]))

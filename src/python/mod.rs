@@ -13,6 +13,7 @@ mod fit;
 mod graphcut;
 mod io;
 mod stereo;
+mod templates;
 
 use crate::error::Error;
 use pyo3::create_exception;
@@ -70,5 +71,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     graphcut::register(m)?;
     io::register(m)?;
     stereo::register(m)?;
+    templates::register(m)?;
     Ok(())
 }

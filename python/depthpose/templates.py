@@ -1,0 +1,278 @@
+"""The template database that finds the initial pose (paper Section II-C).
+
+768 templates (4 poses per arm and per leg, 3 views) rendered from the super-quadric
+body and described by surface contexts. ``TemplateDatabase.match`` returns candidate
+poses placed at the observed body; the fitting stage refines the best few.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from . import _core
+from ._core import Camera, FileFormatError, InvalidInputError, surface_context
+
+__all__ = [
+    "ARM_POSES",
+    "LEG_POSES",
+    "VIEWS",
+    "Candidate",
+    "TemplateDatabase",
+    "surface_context",
+]
+
+ARM_POSES = ("down", "raised_sideways", "forward", "bent")
+LEG_POSES = ("standing", "step_forward", "step_back", "knee_raised")
+VIEWS = ("front", "left_side", "right_side")
+NUM_TEMPLATES = 768
+_SETTING_NAMES = ("width", "height", "distance", "field_height", "renderer", "samples",
+                  "radial_bins", "angular_bins", "seed")
+
+
+@dataclass(frozen=True)
+class Candidate:
+    """A template matched to a depth image, placed at the observed body."""
+
+    index: int
+    view: int
+    pose: np.ndarray  # (22,)
+    joints: np.ndarray  # (15, 3) camera frame
+    cost: float  # mean assignment cost per sample
+    prune_cost: float
+    scale: float  # observed body size / template body size
+
+    @property
+    def code(self) -> tuple[str, str, str, str, str]:
+        """(right arm, left arm, right leg, left leg, view) names of the template."""
+        rest = self.index % 256
+        return (ARM_POSES[rest // 64], ARM_POSES[(rest // 16) % 4], LEG_POSES[(rest // 4) % 4],
+                LEG_POSES[rest % 4], VIEWS[self.index // 256])
+
+
+def _model_shape(model: Any) -> np.ndarray | None:
+    """The 27 shape parameters of ``model``: None (default model), an array, or an
+    object with ``shape`` / ``shape_vector()``."""
+    if model is None:
+        return None
+    if isinstance(model, np.ndarray):
+        return np.ascontiguousarray(model, dtype=np.float64)
+    for attr in ("shape_vector", "shape"):
+        v = getattr(model, attr, None)
+        if v is not None:
+            v = v() if callable(v) else v
+            return np.ascontiguousarray(np.asarray(v, dtype=np.float64).ravel())
+    raise InvalidInputError(f"model: expected a body model or 27 shape values, got {type(model)}")
+
+
+def _progress_bar() -> Callable[[int, int], None]:
+    """A one-line text progress bar on stderr."""
+    start = time.perf_counter()
+
+    def report(done: int, total: int) -> None:
+        width = 30
+        filled = int(width * done / total)
+        bar = "#" * filled + "-" * (width - filled)
+        end = "\n" if done >= total else ""
+        elapsed = time.perf_counter() - start
+        sys.stderr.write(f"\rtemplates [{bar}] {done}/{total} {elapsed:.1f}s{end}")
+        sys.stderr.flush()
+
+    return report
+
+
+def _raycast_depths(shape: np.ndarray | None, camera: Camera, distance: float,
+                    progress: Callable[[int, int], None] | None) -> np.ndarray:
+    """Template depth images by trimesh ray casting of the super-quadric meshes (embree
+    when ``embreex`` is installed, trimesh's own triangle intersector otherwise)."""
+    import trimesh
+
+    h, w = camera.height, camera.width
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    dirs = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy,
+                     np.ones_like(u)], axis=-1).reshape(-1, 3)
+    unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
+    origins = np.zeros_like(unit)
+    out = np.zeros((NUM_TEMPLATES, h, w), dtype=np.float32)
+    for i in range(NUM_TEMPLATES):
+        verts, faces = _core._TemplateDatabase.template_mesh(i, shape, distance=distance)
+        mesh = trimesh.Trimesh(vertices=verts, faces=faces, process=False)
+        locs, rays, _ = mesh.ray.intersects_location(origins, unit, multiple_hits=True)
+        depth = np.full(h * w, np.inf)
+        np.minimum.at(depth, rays, locs[:, 2])
+        depth[~np.isfinite(depth)] = 0.0
+        out[i] = depth.reshape(h, w)
+        if progress is not None and ((i + 1) % 64 == 0 or i + 1 == NUM_TEMPLATES):
+            progress(i + 1, NUM_TEMPLATES)
+    return out
+
+
+class TemplateDatabase:
+    """768 rendered template poses with their surface-context descriptors."""
+
+    def __init__(self, native: Any) -> None:
+        self._db = native
+
+    @classmethod
+    def build(cls, model: Any = None, camera: Camera | None = None, *, width: int = 96,
+              height: int = 96, distance: float = 3.0, field_height: float = 2.4,
+              renderer: str = "superquadric", samples: int = 100, radial_bins: int = 5,
+              angular_bins: int = 12, seed: int = 0, progress: bool = True) -> TemplateDatabase:
+        """Renders and describes the 768 templates.
+
+        ``renderer``: "superquadric" (Rust rasteriser of the eq. 1 meshes, the default),
+        "ellipsoid" (Rust ray cast of the fitting ellipsoids) or "trimesh" (trimesh ray
+        casting of the same super-quadric meshes; slow without embree). ``camera``, if
+        given, sets the template image size (the templates are always rendered with
+        the body centred; descriptors are scale-invariant).
+        """
+        if camera is not None:
+            width, height = camera.width, camera.height
+        shape = _model_shape(model)
+        report = _progress_bar() if progress else None
+        if renderer == "trimesh":
+            _, cfg = _core._TemplateDatabase.settings(shape, width=width, height=height,
+                                                      distance=distance,
+                                                      field_height=field_height)
+            f = height * distance / field_height
+            cam = Camera(f, f, 0.5 * (width - 1), 0.5 * (height - 1), width, height)
+            depths = _raycast_depths(shape, cam, distance, report)
+            native = _core._TemplateDatabase.from_depths(
+                depths, shape, width=width, height=height, distance=distance,
+                field_height=field_height, samples=samples, radial_bins=radial_bins,
+                angular_bins=angular_bins, seed=seed)
+        else:
+            native = _core._TemplateDatabase.build(
+                shape, width=width, height=height, distance=distance, field_height=field_height,
+                renderer=renderer, samples=samples, radial_bins=radial_bins,
+                angular_bins=angular_bins, seed=seed, progress=report)
+        return cls(native)
+
+    def match(self, depth: np.ndarray, camera: Camera, mask: np.ndarray | None = None,
+              top_k: int = 5, *, shortlist: int = 16, representatives: int = 8,
+              location_weight: float = 0.1, dummy_cost: float = 0.15) -> list[Candidate]:
+        """Best ``top_k`` templates for the body in ``depth`` (H, W) float32 metres, each
+        with its pose placed at the observed body."""
+        found, _ = self._db.match_depth(depth, camera, mask, top_k=top_k, shortlist=shortlist,
+                                        representatives=representatives,
+                                        location_weight=location_weight,
+                                        dummy_cost=dummy_cost)
+        return [Candidate(**c) for c in found]
+
+    def match_with_shortlist(self, depth: np.ndarray, camera: Camera,
+                             mask: np.ndarray | None = None, top_k: int = 5,
+                             **kwargs: Any) -> tuple[list[Candidate], list[int]]:
+        """Like :meth:`match`, also returning the pruning stage's short list."""
+        found, short = self._db.match_depth(depth, camera, mask, top_k=top_k, **kwargs)
+        return [Candidate(**c) for c in found], list(short)
+
+    def exact_costs(self, depth: np.ndarray, camera: Camera, indices: list[int],
+                    mask: np.ndarray | None = None) -> np.ndarray:
+        """Exact assignment costs against the given templates, without pruning."""
+        return np.asarray(self._db.exact_costs(depth, camera, list(indices), mask))
+
+    # -- persistence -----------------------------------------------------------------
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Writes the database to an ``.npz`` file (format version and settings hash
+        included)."""
+        arrays = self._db.to_arrays()
+        arrays["hash"] = np.array(arrays["hash"])
+        arrays["format_version"] = np.array(arrays["format_version"])
+        path = Path(path)
+        tmp = path.with_name(path.name + ".tmp.npz")
+        np.savez(tmp, **arrays)
+        os.replace(tmp, path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike, model: Any = None,
+             **settings: Any) -> TemplateDatabase:
+        """Reads a database written by :meth:`save`. With ``model`` or settings given,
+        refuses a file built for another model or other settings; a file of another
+        format version or a corrupt file raises :class:`FileFormatError`."""
+        path = Path(path)
+        unknown = set(settings) - set(_SETTING_NAMES)
+        if unknown:
+            raise InvalidInputError(f"settings: unknown names {sorted(unknown)}")
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                arrays = {k: f[k] for k in f.files}
+        except FileNotFoundError:
+            raise FileFormatError(f"{path}: no such file") from None
+        except (OSError, ValueError) as e:
+            raise FileFormatError(f"{path}: not a template database ({e})") from None
+        for k in ("format_version", "hash"):
+            if k not in arrays:
+                raise FileFormatError(f"{path}: missing entry {k!r}; not a template database")
+        try:
+            arrays["format_version"] = int(arrays["format_version"])
+            arrays["hash"] = str(arrays["hash"])
+        except (TypeError, ValueError):
+            raise FileFormatError(f"{path}: bad format_version or hash") from None
+        shape = cfg = None
+        if model is not None or settings:
+            shape = _model_shape(model)
+            if shape is None:
+                shape = _default_model_shape()
+            _, cfg = _core._TemplateDatabase.settings(shape, **settings)
+        return cls(_core._TemplateDatabase.from_arrays(arrays, str(path), shape, cfg))
+
+    @classmethod
+    def default(cls, *, progress: bool = True) -> TemplateDatabase:
+        """The database of the default model and settings, cached under
+        ``$DEPTHPOSE_CACHE`` (or ``~/.cache/depthpose``) and built on first use."""
+        root = Path(os.environ.get("DEPTHPOSE_CACHE", Path.home() / ".cache" / "depthpose"))
+        digest, _ = _core._TemplateDatabase.settings()
+        path = root / f"templates-{digest}.npz"
+        if path.exists():
+            try:
+                return cls.load(path, model=_default_model_shape())
+            except FileFormatError:
+                pass  # stale or corrupt: rebuild below
+        db = cls.build(progress=progress)
+        root.mkdir(parents=True, exist_ok=True)
+        db.save(path)
+        return db
+
+    # -- contents --------------------------------------------------------------------
+
+    def __len__(self) -> int:
+        return len(self._db)
+
+    @property
+    def hash(self) -> str:
+        return self._db.hash
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(768, 22) template poses as rendered (hip centre straight ahead)."""
+        return self._db.poses
+
+    @property
+    def joints(self) -> np.ndarray:
+        """(768, 15, 3) template joints, template camera frame."""
+        return self._db.joints
+
+    @property
+    def views(self) -> list[int]:
+        return self._db.views
+
+    @property
+    def camera(self) -> Camera:
+        """The camera the templates were rendered with."""
+        return self._db.camera
+
+    @property
+    def model_shape(self) -> np.ndarray:
+        return self._db.model_shape
+
+
+def _default_model_shape() -> np.ndarray:
+    """Shape parameters of the default body model."""
+    return np.asarray(_core._default_model_shape())

@@ -1,0 +1,704 @@
+//! Surface-context descriptors (paper Section II-C, eqs. 2–4; after the shape context of
+//! Belongie, Malik and Puzicha).
+//!
+//! 1. The silhouette's pixels are summarised on a grid scaled to the silhouette (cell
+//!    side `sqrt(area / (samples · cells_per_sample))`, origin at the silhouette's
+//!    bounding box, jittered by the seed): each cell keeps its pixel count, mean pixel
+//!    position and the sum of its surface normals.
+//! 2. Sample points: a coarser grid of the same kind with about `samples` occupied
+//!    cells; in each, the pixel nearest the cell centre.
+//! 3. Around each sample, log-polar bins in the image plane (`radial_bins` log-spaced
+//!    rings from `inner_radius` to `outer_radius` times the mean pairwise distance of
+//!    the samples, `angular_bins` sectors); a bin holds the sum of the normals of the
+//!    pixels falling in it divided by the silhouette's pixel count. The descriptor is
+//!    those sums concatenated (3 values per bin).
+//!
+//! Because both grids and the radii scale with the silhouette, the descriptors do not
+//! change (up to pixel quantisation) when the body moves in the image or comes closer;
+//! every sum is order-independent, so neither does shuffling the input points. Normals
+//! are first rotated so the line of sight to the body's centroid becomes +z, so a body
+//! off the optical axis is described as if seen straight on.
+
+use crate::camera::Camera;
+use crate::cloud::{normals_from_depth, Cloud, DepthView, NormalConfig};
+use crate::error::{ensure, Error, Result};
+use nalgebra::{Rotation3, Vector3};
+use rayon::prelude::*;
+
+/// Settings of the surface-context descriptors.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DescriptorConfig {
+    /// Target number of sample points (the actual count is within a few of it).
+    pub samples: usize,
+    /// Log-spaced rings.
+    pub radial_bins: usize,
+    /// Sectors.
+    pub angular_bins: usize,
+    /// Inner and outer ring radius, in units of the mean pairwise sample distance;
+    /// points closer than `inner_radius` fall in the first ring, farther than
+    /// `outer_radius` in none.
+    pub inner_radius: f64,
+    pub outer_radius: f64,
+    /// Summary cells per sample cell (the normal grid is this many times finer).
+    pub cells_per_sample: f64,
+    /// Seed of the grid jitter; equal seeds give identical descriptors.
+    pub seed: u64,
+    /// Normal estimation.
+    pub normal_radius: usize,
+}
+
+impl Default for DescriptorConfig {
+    fn default() -> Self {
+        DescriptorConfig {
+            samples: 100,
+            radial_bins: 5,
+            angular_bins: 12,
+            inner_radius: 0.125,
+            outer_radius: 2.0,
+            cells_per_sample: 4.0,
+            seed: 0,
+            normal_radius: 2,
+        }
+    }
+}
+
+/// Fewest sample points / silhouette pixels we describe.
+pub const MIN_SAMPLES: usize = 4;
+pub const MIN_POINTS: usize = 20;
+/// Silhouette points farther than this from the median depth (m) are not the body: a
+/// body with an arm stretched toward the camera spans well under it.
+pub const MAX_DEPTH_FROM_MEDIAN: f32 = 1.0;
+/// Refinements of the sample-grid step toward the target sample count.
+const GRID_REFINEMENTS: usize = 3;
+
+impl DescriptorConfig {
+    pub fn validate(&self) -> Result<()> {
+        ensure(
+            (MIN_SAMPLES..=10_000).contains(&self.samples),
+            "samples",
+            || format!("must be in {MIN_SAMPLES}..=10000, got {}", self.samples),
+        )?;
+        ensure((1..=32).contains(&self.radial_bins), "radial_bins", || {
+            format!("must be in 1..=32, got {}", self.radial_bins)
+        })?;
+        ensure(
+            (1..=64).contains(&self.angular_bins),
+            "angular_bins",
+            || format!("must be in 1..=64, got {}", self.angular_bins),
+        )?;
+        ensure(
+            self.inner_radius.is_finite()
+                && self.inner_radius > 0.0
+                && self.outer_radius.is_finite()
+                && self.outer_radius > self.inner_radius,
+            "inner_radius/outer_radius",
+            || {
+                format!(
+                    "need 0 < inner < outer, got {} and {}",
+                    self.inner_radius, self.outer_radius
+                )
+            },
+        )?;
+        ensure(
+            self.cells_per_sample.is_finite() && (1.0..=100.0).contains(&self.cells_per_sample),
+            "cells_per_sample",
+            || format!("must be in 1..=100, got {}", self.cells_per_sample),
+        )?;
+        ensure(
+            (1..=32).contains(&self.normal_radius),
+            "normal_radius",
+            || format!("must be in 1..=32, got {}", self.normal_radius),
+        )
+    }
+
+    /// Values per descriptor: 3 per bin.
+    pub fn dim(&self) -> usize {
+        3 * self.radial_bins * self.angular_bins
+    }
+}
+
+/// The descriptors of one silhouette.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SurfaceContext {
+    /// Values per descriptor.
+    pub dim: usize,
+    /// Sample positions in pixels (u, v).
+    pub pixels: Vec<[f32; 2]>,
+    /// Sample positions relative to the silhouette centroid, in units of `scale`.
+    pub positions: Vec<[f32; 2]>,
+    /// Descriptors, samples × `dim`, row-major.
+    pub descriptors: Vec<f32>,
+    /// Mean pairwise distance of the samples (pixels): the unit of the log-polar radii.
+    pub scale: f64,
+    /// Silhouette centroid (pixels).
+    pub centroid: [f64; 2],
+    /// Number of silhouette pixels described.
+    pub points: usize,
+}
+
+impl SurfaceContext {
+    pub fn len(&self) -> usize {
+        self.pixels.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.pixels.is_empty()
+    }
+
+    /// Descriptor of sample `i`.
+    #[inline]
+    pub fn descriptor(&self, i: usize) -> &[f32] {
+        &self.descriptors[i * self.dim..(i + 1) * self.dim]
+    }
+}
+
+/// splitmix64: a tiny deterministic generator for the grid jitter.
+fn splitmix(state: &mut u64) -> f64 {
+    *state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    let mut z = *state;
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 53) as f64
+}
+
+/// A grid over the silhouette's bounding box.
+struct Grid {
+    origin: [f64; 2],
+    step: f64,
+    cols: usize,
+    rows: usize,
+}
+
+impl Grid {
+    fn new(lo: [f64; 2], hi: [f64; 2], step: f64, jitter: [f64; 2]) -> Self {
+        let origin = [lo[0] - jitter[0] * step, lo[1] - jitter[1] * step];
+        let cols = ((hi[0] - origin[0]) / step).floor() as usize + 1;
+        let rows = ((hi[1] - origin[1]) / step).floor() as usize + 1;
+        Grid {
+            origin,
+            step,
+            cols,
+            rows,
+        }
+    }
+
+    #[inline]
+    fn cell(&self, p: [f32; 2]) -> usize {
+        let c = ((p[0] as f64 - self.origin[0]) / self.step) as usize;
+        let r = ((p[1] as f64 - self.origin[1]) / self.step) as usize;
+        r.min(self.rows - 1) * self.cols + c.min(self.cols - 1)
+    }
+
+    fn centre(&self, cell: usize) -> [f64; 2] {
+        let (r, c) = (cell / self.cols, cell % self.cols);
+        [
+            self.origin[0] + (c as f64 + 0.5) * self.step,
+            self.origin[1] + (r as f64 + 0.5) * self.step,
+        ]
+    }
+
+    fn occupied(&self, pixels: &[[f32; 2]], seen: &mut Vec<bool>) -> usize {
+        seen.clear();
+        seen.resize(self.rows * self.cols, false);
+        let mut n = 0;
+        for p in pixels {
+            let c = self.cell(*p);
+            if !seen[c] {
+                seen[c] = true;
+                n += 1;
+            }
+        }
+        n
+    }
+}
+
+/// Surface-context descriptors of a silhouette given as pixel positions (u, v) — one
+/// point per pixel, in any order — and the unit normal of each.
+pub fn surface_context_from_points(
+    pixels: &[[f32; 2]],
+    normals: &[[f32; 3]],
+    config: &DescriptorConfig,
+) -> Result<SurfaceContext> {
+    config.validate()?;
+    ensure(pixels.len() == normals.len(), "normals", || {
+        format!("has {} normals for {} points", normals.len(), pixels.len())
+    })?;
+    if pixels.len() < MIN_POINTS {
+        return Err(Error::NoBody(format!(
+            "the silhouette has {} pixels; at least {MIN_POINTS} are needed to describe it",
+            pixels.len()
+        )));
+    }
+    ensure(
+        pixels.iter().flatten().all(|v| v.is_finite())
+            && normals.iter().flatten().all(|v| v.is_finite()),
+        "points",
+        || "pixel positions and normals must be finite".to_string(),
+    )?;
+    let m = pixels.len();
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    let mut centroid = [0.0f64; 2];
+    for p in pixels {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k] as f64);
+            hi[k] = hi[k].max(p[k] as f64);
+            centroid[k] += p[k] as f64;
+        }
+    }
+    centroid = [centroid[0] / m as f64, centroid[1] / m as f64];
+    let mut rng = config.seed;
+    let jitter = [splitmix(&mut rng), splitmix(&mut rng)];
+
+    // Sample grid: step refined until about `samples` cells are occupied (occupancy
+    // ∝ 1/step² away from the boundary).
+    let mut seen = Vec::new();
+    let mut step = (m as f64 / config.samples as f64).sqrt();
+    for _ in 0..GRID_REFINEMENTS {
+        let n = Grid::new(lo, hi, step, jitter).occupied(pixels, &mut seen);
+        step *= (n as f64 / config.samples as f64).sqrt();
+    }
+    let grid = Grid::new(lo, hi, step, jitter);
+    // Per cell the pixel nearest its centre; ties broken by (v, u) so input order
+    // does not matter.
+    let mut best: Vec<(f64, [f32; 2])> = vec![(f64::INFINITY, [0.0; 2]); grid.rows * grid.cols];
+    for p in pixels {
+        let c = grid.cell(*p);
+        let centre = grid.centre(c);
+        let d = (p[0] as f64 - centre[0]).powi(2) + (p[1] as f64 - centre[1]).powi(2);
+        let b = &mut best[c];
+        if d < b.0 || (d == b.0 && (p[1], p[0]) < (b.1[1], b.1[0])) {
+            *b = (d, *p);
+        }
+    }
+    let samples: Vec<[f32; 2]> = best
+        .iter()
+        .filter(|b| b.0.is_finite())
+        .map(|b| b.1)
+        .collect();
+    let n = samples.len();
+    ensure(n >= 2, "points", || {
+        "the silhouette is too small to sample".to_string()
+    })?;
+
+    // Summary cells: count, mean position and normal sum (f64: order-independent up to
+    // rounding).
+    let fine = Grid::new(lo, hi, step / config.cells_per_sample.sqrt(), jitter);
+    let mut acc = vec![[0.0f64; 6]; fine.rows * fine.cols];
+    for (p, nrm) in pixels.iter().zip(normals) {
+        let a = &mut acc[fine.cell(*p)];
+        a[0] += 1.0;
+        a[1] += p[0] as f64;
+        a[2] += p[1] as f64;
+        a[3] += nrm[0] as f64;
+        a[4] += nrm[1] as f64;
+        a[5] += nrm[2] as f64;
+    }
+    let inv_m = 1.0 / m as f64;
+    let cells: Vec<[f32; 5]> = acc
+        .iter()
+        .filter(|a| a[0] > 0.0)
+        .map(|a| {
+            [
+                (a[1] / a[0]) as f32,
+                (a[2] / a[0]) as f32,
+                (a[3] * inv_m) as f32,
+                (a[4] * inv_m) as f32,
+                (a[5] * inv_m) as f32,
+            ]
+        })
+        .collect();
+
+    let mut total = 0.0f64;
+    for i in 0..n {
+        for j in i + 1..n {
+            let d = [
+                (samples[i][0] - samples[j][0]) as f64,
+                (samples[i][1] - samples[j][1]) as f64,
+            ];
+            total += d[0].hypot(d[1]);
+        }
+    }
+    let scale = total / (n * (n - 1) / 2) as f64;
+    ensure(scale > 0.0, "points", || {
+        "the samples coincide; the silhouette has no extent".to_string()
+    })?;
+
+    let dim = config.dim();
+    let mut descriptors = vec![0.0f32; n * dim];
+    let (nr, na) = (config.radial_bins, config.angular_bins);
+    let inner = (config.inner_radius * scale) as f32;
+    let outer = (config.outer_radius * scale) as f32;
+    let outer2 = outer * outer;
+    let log_inner = inner.ln();
+    let radial_per_log = nr as f32 / (outer / inner).ln();
+    let angular_per_rad = na as f32 / std::f32::consts::TAU;
+    descriptors
+        .par_chunks_mut(dim)
+        .zip(samples.par_iter())
+        .for_each(|(desc, s)| {
+            for c in &cells {
+                let (du, dv) = (c[0] - s[0], c[1] - s[1]);
+                let r2 = du * du + dv * dv;
+                if r2 >= outer2 {
+                    continue;
+                }
+                let rb = ((0.5 * r2.ln() - log_inner) * radial_per_log).max(0.0) as usize;
+                let theta = dv.atan2(du) + std::f32::consts::PI;
+                let ab = ((theta * angular_per_rad) as usize) % na;
+                let k = 3 * (rb.min(nr - 1) * na + ab);
+                desc[k] += c[2];
+                desc[k + 1] += c[3];
+                desc[k + 2] += c[4];
+            }
+        });
+    let positions = samples
+        .iter()
+        .map(|s| {
+            [
+                ((s[0] as f64 - centroid[0]) / scale) as f32,
+                ((s[1] as f64 - centroid[1]) / scale) as f32,
+            ]
+        })
+        .collect();
+    Ok(SurfaceContext {
+        dim,
+        pixels: samples,
+        positions,
+        descriptors,
+        scale,
+        centroid,
+        points: m,
+    })
+}
+
+/// The rotation taking the unit line of sight `dir` to +z (the shortest arc).
+pub fn line_of_sight_alignment(dir: &Vector3<f64>) -> Rotation3<f64> {
+    Rotation3::rotation_between(dir, &Vector3::z()).unwrap_or_else(Rotation3::identity)
+}
+
+/// A silhouette ready to describe: its cloud, normals (aligned to the line of sight)
+/// and 3-D centroid.
+#[derive(Debug, Clone)]
+pub struct Silhouette {
+    pub cloud: Cloud,
+    /// Unit normals, rotated by `alignment`.
+    pub normals: Vec<[f32; 3]>,
+    /// Mean of the 3-D points (camera frame).
+    pub centroid: Vector3<f64>,
+    /// Rotation taking the line of sight to the centroid onto +z.
+    pub alignment: Rotation3<f64>,
+}
+
+impl Silhouette {
+    /// Back-projects the masked depth pixels and estimates their normals.
+    pub fn from_depth(
+        depth: &DepthView,
+        camera: &Camera,
+        mask: Option<&[bool]>,
+        normal_radius: usize,
+    ) -> Result<Self> {
+        let mut cloud = Cloud::from_depth(depth, camera, mask)?;
+        // Masks from background subtraction or ground truth can hold a few pixels of
+        // the floor or wall behind the body: drop points far from the median depth.
+        if !cloud.is_empty() {
+            let mut z: Vec<f32> = cloud.points.iter().map(|p| p[2]).collect();
+            let mid = z.len() / 2;
+            let median = *z.select_nth_unstable_by(mid, f32::total_cmp).1;
+            let far = |p: &[f32; 3]| (p[2] - median).abs() > MAX_DEPTH_FROM_MEDIAN;
+            if cloud.points.iter().any(far) {
+                let mut keep = vec![false; depth.data.len()];
+                for (p, &i) in cloud.points.iter().zip(&cloud.pixels) {
+                    keep[i as usize] = !far(p);
+                }
+                cloud = Cloud::from_depth(depth, camera, Some(&keep))?;
+            }
+        }
+        if cloud.len() < MIN_POINTS {
+            return Err(Error::NoBody(format!(
+                "only {} foreground pixels with depth; at least {MIN_POINTS} are needed",
+                cloud.len()
+            )));
+        }
+        let mut normals = normals_from_depth(
+            depth,
+            camera,
+            &cloud,
+            &NormalConfig {
+                radius: normal_radius,
+                ..Default::default()
+            },
+        );
+        let mut c = Vector3::zeros();
+        for p in &cloud.points {
+            c += Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        }
+        let centroid = c / cloud.len() as f64;
+        let alignment = line_of_sight_alignment(&centroid.normalize());
+        let r = alignment.matrix().cast::<f32>();
+        for n in normals.iter_mut() {
+            let v = r * Vector3::from(*n);
+            *n = [v.x, v.y, v.z];
+        }
+        Ok(Silhouette {
+            cloud,
+            normals,
+            centroid,
+            alignment,
+        })
+    }
+
+    /// Pixel positions (u, v) of the points.
+    pub fn pixels(&self) -> Vec<[f32; 2]> {
+        (0..self.cloud.len())
+            .map(|k| {
+                let (r, c) = self.cloud.pixel(k);
+                [c as f32, r as f32]
+            })
+            .collect()
+    }
+
+    /// Its surface-context descriptors.
+    pub fn surface_context(&self, config: &DescriptorConfig) -> Result<SurfaceContext> {
+        surface_context_from_points(&self.pixels(), &self.normals, config)
+    }
+}
+
+/// Surface-context descriptors of the (masked) body in a depth image (metres, H×W).
+pub fn surface_context_from_depth(
+    depth: &DepthView,
+    camera: &Camera,
+    mask: Option<&[bool]>,
+    config: &DescriptorConfig,
+) -> Result<SurfaceContext> {
+    config.validate()?;
+    Silhouette::from_depth(depth, camera, mask, config.normal_radius)?.surface_context(config)
+}
+
+/// L2 distance between two descriptors.
+#[inline]
+pub fn descriptor_distance(a: &[f32], b: &[f32]) -> f32 {
+    squared_distance(a, b).sqrt()
+}
+
+/// Lanes of the distance accumulator: independent partial sums let the compiler
+/// vectorise (a single running f32 sum must stay sequential).
+const LANES: usize = 8;
+
+/// Squared L2 distance (the inner loop of matching).
+#[inline]
+pub fn squared_distance(a: &[f32], b: &[f32]) -> f32 {
+    let n = a.len().min(b.len());
+    let (a, b) = (&a[..n], &b[..n]);
+    let mut acc = [0.0f32; LANES];
+    let mut ca = a.chunks_exact(LANES);
+    let mut cb = b.chunks_exact(LANES);
+    for (x, y) in (&mut ca).zip(&mut cb) {
+        for k in 0..LANES {
+            let d = x[k] - y[k];
+            acc[k] += d * d;
+        }
+    }
+    let mut total: f32 = acc.iter().sum();
+    for (x, y) in ca.remainder().iter().zip(cb.remainder()) {
+        total += (x - y) * (x - y);
+    }
+    total
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::BodyModel;
+
+    fn render(pose: &crate::body::Pose, cam: &Camera) -> Vec<f32> {
+        BodyModel::default().render_depth(pose, cam).0
+    }
+
+    fn context(depth: &[f32], cam: &Camera, cfg: &DescriptorConfig) -> SurfaceContext {
+        let view = DepthView::new(depth, cam.height, cam.width, "depth").unwrap();
+        surface_context_from_depth(&view, cam, None, cfg).unwrap()
+    }
+
+    /// Mean over samples of the distance to the nearest-position sample of `b`.
+    fn mean_nearest(a: &SurfaceContext, b: &SurfaceContext) -> f32 {
+        let mut total = 0.0;
+        for i in 0..a.len() {
+            let pa = a.positions[i];
+            let j = (0..b.len())
+                .min_by(|&x, &y| {
+                    let dx = (b.positions[x][0] - pa[0]).hypot(b.positions[x][1] - pa[1]);
+                    let dy = (b.positions[y][0] - pa[0]).hypot(b.positions[y][1] - pa[1]);
+                    dx.total_cmp(&dy)
+                })
+                .unwrap();
+            total += descriptor_distance(a.descriptor(i), b.descriptor(j));
+        }
+        total / a.len() as f32
+    }
+
+    fn arm_raised() -> crate::body::Pose {
+        let mut p = BodyModel::neutral_pose();
+        p[crate::body::param::R_SHOULDER + 1] = 1.5;
+        p[crate::body::param::L_SHOULDER] = 1.4;
+        p
+    }
+
+    #[test]
+    fn shape_and_count() {
+        let cam = Camera::itop();
+        let cfg = DescriptorConfig::default();
+        let sc = context(&render(&BodyModel::neutral_pose(), &cam), &cam, &cfg);
+        assert_eq!(sc.dim, 180);
+        assert_eq!(sc.descriptors.len(), sc.len() * 180);
+        assert!((90..=110).contains(&sc.len()), "{}", sc.len());
+        // The normal sums over all bins never exceed the share of points (≤ 1).
+        for i in 0..sc.len() {
+            let mag: f32 = sc
+                .descriptor(i)
+                .chunks(3)
+                .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+                .sum();
+            assert!(mag <= 1.0 + 1e-4 && mag > 0.05, "{mag}");
+        }
+        // Positions are normalised: their mean pairwise distance is ≈ 1.
+        let n = sc.len();
+        let mut t = 0.0;
+        for i in 0..n {
+            for j in i + 1..n {
+                t += (sc.positions[i][0] - sc.positions[j][0])
+                    .hypot(sc.positions[i][1] - sc.positions[j][1]);
+            }
+        }
+        assert!((t / (n * (n - 1) / 2) as f32 - 1.0).abs() < 1e-3);
+    }
+
+    #[test]
+    fn deterministic_for_a_seed_and_varies_with_it() {
+        let cam = Camera::itop();
+        let d = render(&arm_raised(), &cam);
+        let cfg = DescriptorConfig::default();
+        assert_eq!(context(&d, &cam, &cfg), context(&d, &cam, &cfg));
+        let other = context(&d, &cam, &DescriptorConfig { seed: 7, ..cfg });
+        assert_ne!(other.pixels, context(&d, &cam, &cfg).pixels);
+    }
+
+    #[test]
+    fn invariant_to_point_order() {
+        let cam = Camera::itop();
+        let d = render(&arm_raised(), &cam);
+        let view = DepthView::new(&d, cam.height, cam.width, "depth").unwrap();
+        let sil = Silhouette::from_depth(&view, &cam, None, 2).unwrap();
+        let (px, nm) = (sil.pixels(), sil.normals.clone());
+        let cfg = DescriptorConfig::default();
+        let a = surface_context_from_points(&px, &nm, &cfg).unwrap();
+        // A fixed pseudo-random permutation.
+        let mut idx: Vec<usize> = (0..px.len()).collect();
+        let mut s = 99u64;
+        for i in (1..idx.len()).rev() {
+            let j = (splitmix(&mut s) * (i + 1) as f64) as usize;
+            idx.swap(i, j);
+        }
+        let px2: Vec<_> = idx.iter().map(|&i| px[i]).collect();
+        let nm2: Vec<_> = idx.iter().map(|&i| nm[i]).collect();
+        let b = surface_context_from_points(&px2, &nm2, &cfg).unwrap();
+        assert_eq!(a.pixels, b.pixels);
+        for (x, y) in a.descriptors.iter().zip(&b.descriptors) {
+            assert!((x - y).abs() < 1e-6);
+        }
+    }
+
+    #[test]
+    fn invariant_to_translation_and_scale() {
+        let cam = Camera::itop();
+        let cfg = DescriptorConfig::default();
+        let pose = arm_raised();
+        let base = context(&render(&pose, &cam), &cam, &cfg);
+        // Shifted in the image by an exact number of pixels: principal point moved.
+        let shifted_cam = Camera::new(
+            cam.fx,
+            cam.fy,
+            cam.cx + 23.0,
+            cam.cy - 11.0,
+            cam.width,
+            cam.height,
+        )
+        .unwrap();
+        let shifted = context(&render(&pose, &shifted_cam), &shifted_cam, &cfg);
+        assert_eq!(shifted.points, base.points);
+        for (a, b) in shifted.positions.iter().zip(&base.positions) {
+            assert!((a[0] - b[0]).abs() < 1e-4 && (a[1] - b[1]).abs() < 1e-4);
+        }
+        for (a, b) in shifted.descriptors.iter().zip(&base.descriptors) {
+            assert!((a - b).abs() < 1e-5);
+        }
+        // The same body farther away (fewer pixels) and a different pose.
+        let mut far = pose;
+        far[2] = 4.2;
+        let far = context(&render(&far, &cam), &cam, &cfg);
+        assert!(far.points < base.points * 6 / 10);
+        let other = context(&render(&BodyModel::neutral_pose(), &cam), &cam, &cfg);
+        let same = mean_nearest(&base, &far);
+        let diff = mean_nearest(&base, &other);
+        let typical: f32 = (0..base.len())
+            .map(|i| base.descriptor(i).iter().map(|v| v * v).sum::<f32>().sqrt())
+            .sum::<f32>()
+            / base.len() as f32;
+        assert!(
+            same < 0.25 * typical,
+            "scale change moved descriptors by {same} of {typical}"
+        );
+        assert!(diff > 1.5 * same, "same {same} other pose {diff}");
+    }
+
+    #[test]
+    fn squared_distance_is_exact() {
+        for n in [0usize, 3, 8, 13, 180] {
+            let a: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
+            let b: Vec<f32> = (0..n).map(|i| (i as f32 * 0.11).cos()).collect();
+            let want: f64 = a
+                .iter()
+                .zip(&b)
+                .map(|(x, y)| ((x - y) as f64).powi(2))
+                .sum();
+            assert!((squared_distance(&a, &b) as f64 - want).abs() < 1e-4 * (1.0 + want));
+        }
+    }
+
+    #[test]
+    fn bad_input_is_rejected() {
+        let cfg = DescriptorConfig::default();
+        let px = vec![[1.0f32, 2.0]; 50];
+        let nm = vec![[0.0f32, 0.0, -1.0]; 49];
+        assert!(matches!(
+            surface_context_from_points(&px, &nm, &cfg),
+            Err(Error::InvalidArgument { .. })
+        ));
+        assert!(matches!(
+            surface_context_from_points(&px[..5], &nm[..5], &cfg),
+            Err(Error::NoBody(_))
+        ));
+        let bad = DescriptorConfig {
+            radial_bins: 0,
+            ..cfg
+        };
+        assert!(bad.validate().is_err());
+        let bad = DescriptorConfig {
+            inner_radius: 3.0,
+            ..cfg
+        };
+        assert!(bad.validate().is_err());
+        let cam = Camera::itop();
+        let empty = vec![0.0f32; cam.width * cam.height];
+        let view = DepthView::new(&empty, cam.height, cam.width, "depth").unwrap();
+        assert!(matches!(
+            surface_context_from_depth(&view, &cam, None, &cfg),
+            Err(Error::NoBody(_))
+        ));
+        let mask = vec![false; 3];
+        let d = render(&BodyModel::neutral_pose(), &cam);
+        let view = DepthView::new(&d, cam.height, cam.width, "depth").unwrap();
+        assert!(surface_context_from_depth(&view, &cam, Some(&mask), &cfg).is_err());
+    }
+}
