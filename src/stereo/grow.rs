@@ -9,28 +9,75 @@
 
 use super::correlation::Correlator;
 use rayon::prelude::*;
-use std::collections::BinaryHeap;
 
 /// Value of the integer disparity map where a pixel has no match.
 pub const UNMATCHED: i32 = -1;
 
-/// A candidate in the queue: (ordered correlation bits, pixel index, disparity). The
-/// heap pops the largest correlation first; ties break on the index, so runs are
-/// deterministic.
-type Candidate = (u32, u32, u32);
+/// Number of correlation levels of the bucket queue between the threshold and 1.
+/// Candidates within one level (≈ 0.001 of correlation for τ = 0.6) pop in last-in
+/// first-out order; a binary heap would order them exactly but costs several times
+/// more per candidate.
+pub const QUEUE_LEVELS: usize = 512;
 
-/// Offset that makes every correlation (≥ `NO_CORRELATION` = −2) a positive float, whose
-/// IEEE bits then order like the values.
-const KEY_OFFSET: f32 = 4.0;
-
-#[inline]
-fn key(c: f32) -> u32 {
-    (c + KEY_OFFSET).to_bits()
+/// A candidate match: left pixel index, disparity, correlation.
+#[derive(Clone, Copy)]
+struct Candidate {
+    idx: u32,
+    d: u32,
+    c: f32,
 }
 
-#[inline]
-fn value(k: u32) -> f32 {
-    f32::from_bits(k) - KEY_OFFSET
+/// A monotone priority queue of candidates with correlation in [threshold, 1], bucketed
+/// into `QUEUE_LEVELS` levels: push and pop in O(1).
+struct BucketQueue {
+    buckets: Vec<Vec<Candidate>>,
+    top: usize,
+    len: usize,
+    floor: f32,
+    scale: f32,
+}
+
+impl BucketQueue {
+    fn new() -> Self {
+        BucketQueue {
+            buckets: (0..QUEUE_LEVELS).map(|_| Vec::new()).collect(),
+            top: 0,
+            len: 0,
+            floor: 0.0,
+            scale: 1.0,
+        }
+    }
+
+    /// Empties the queue (keeping the storage) for correlations in [threshold, 1].
+    fn reset(&mut self, threshold: f32) {
+        self.buckets.iter_mut().for_each(Vec::clear);
+        self.top = 0;
+        self.len = 0;
+        self.floor = threshold;
+        self.scale = (QUEUE_LEVELS - 1) as f32 / (1.0 - threshold).max(f32::EPSILON);
+    }
+
+    #[inline]
+    fn push(&mut self, cand: Candidate) {
+        let level = (((cand.c - self.floor) * self.scale) as usize).min(QUEUE_LEVELS - 1);
+        self.buckets[level].push(cand);
+        self.top = self.top.max(level);
+        self.len += 1;
+    }
+
+    #[inline]
+    fn pop(&mut self) -> Option<Candidate> {
+        if self.len == 0 {
+            return None;
+        }
+        loop {
+            if let Some(c) = self.buckets[self.top].pop() {
+                self.len -= 1;
+                return Some(c);
+            }
+            self.top -= 1; // len > 0: a lower bucket holds something
+        }
+    }
 }
 
 /// A tiny deterministic generator (SplitMix64) for drawing seed pixels.
@@ -122,15 +169,25 @@ pub fn random_seeds(
 
 /// Reusable state of the growing stage.
 pub struct Grower {
-    heap: BinaryHeap<Candidate>,
+    queue: BucketQueue,
     right_used: Vec<bool>,
+    /// Per left pixel, the disparity d whose correlations at d − 1, d, d + 1 are in
+    /// `cached` (`NOT_CACHED` if none): neighbours usually grow into a pixel with the
+    /// same d, and subpixel refinement needs the same three values.
+    cached_d: Vec<u32>,
+    cached: Vec<[f32; 3]>,
 }
+
+/// Marks an empty entry of the correlation cache.
+const NOT_CACHED: u32 = u32::MAX;
 
 impl Grower {
     pub fn new() -> Self {
         Grower {
-            heap: BinaryHeap::new(),
+            queue: BucketQueue::new(),
             right_used: Vec::new(),
+            cached_d: Vec::new(),
+            cached: Vec::new(),
         }
     }
 
@@ -153,24 +210,31 @@ impl Grower {
         confidence.fill(f32::NAN);
         self.right_used.clear();
         self.right_used.resize(n, false);
-        self.heap.clear();
+        self.queue.reset(threshold);
+        self.cached_d.clear();
+        self.cached_d.resize(n, NOT_CACHED);
+        self.cached.resize(n, [0.0; 3]);
 
         for &(x, y, d) in seeds {
             if corr.inside(x, y) && d <= max_d.min(corr.max_disparity_at(x)) {
                 let c = corr.score(x, y, d);
                 if c >= threshold {
-                    self.heap.push((key(c), (y * w + x) as u32, d as u32));
+                    self.queue.push(Candidate {
+                        idx: (y * w + x) as u32,
+                        d: d as u32,
+                        c,
+                    });
                 }
             }
         }
 
-        while let Some((k, idx, d)) = self.heap.pop() {
-            let (idx, d) = (idx as usize, d as usize);
+        while let Some(cand) = self.queue.pop() {
+            let (idx, d) = (cand.idx as usize, cand.d as usize);
             if disparity[idx] != UNMATCHED || self.right_used[idx - d] {
                 continue; // uniqueness: one of the two pixels is taken already
             }
             disparity[idx] = d as i32;
-            confidence[idx] = value(k);
+            confidence[idx] = cand.c;
             self.right_used[idx - d] = true;
             let (x, y) = (idx % w, idx / w);
             let neighbours = [
@@ -188,21 +252,55 @@ impl Grower {
                     continue;
                 }
                 let top = max_d.min(corr.max_disparity_at(nx));
+                if d > top + 1 {
+                    continue; // even d − 1 is out of range here
+                }
+                let scores = if self.cached_d[nidx] == d as u32 {
+                    self.cached[nidx]
+                } else {
+                    let s = corr.score3(nx, ny, d, top);
+                    self.cached_d[nidx] = d as u32;
+                    self.cached[nidx] = s;
+                    s
+                };
                 let (mut best_d, mut best) = (0usize, f32::NEG_INFINITY);
-                for nd in d.saturating_sub(1)..=(d + 1).min(top) {
-                    if self.right_used[nidx - nd] {
+                for (k, &c) in scores.iter().enumerate() {
+                    let Some(nd) = (d + k).checked_sub(1) else {
                         continue;
-                    }
-                    let c = corr.score(nx, ny, nd);
-                    if c > best {
+                    };
+                    if nd <= top && !self.right_used[nidx - nd] && c > best {
                         best = c;
                         best_d = nd;
                     }
                 }
                 if best >= threshold {
-                    self.heap.push((key(best), nidx as u32, best_d as u32));
+                    self.queue.push(Candidate {
+                        idx: nidx as u32,
+                        d: best_d as u32,
+                        c: best,
+                    });
                 }
             }
+        }
+    }
+}
+
+impl Grower {
+    /// Correlations at d − 1, d, d + 1 of left pixel (x, y) after [`Grower::grow`]
+    /// (from the cache when there), `NO_CORRELATION` outside 0..=top.
+    pub fn scores_around(
+        &self,
+        corr: &Correlator,
+        x: usize,
+        y: usize,
+        d: usize,
+        top: usize,
+    ) -> [f32; 3] {
+        let idx = y * corr.width() + x;
+        if self.cached_d.get(idx) == Some(&(d as u32)) {
+            self.cached[idx]
+        } else {
+            corr.score3(x, y, d, top)
         }
     }
 }
@@ -218,14 +316,25 @@ mod tests {
     use super::*;
 
     #[test]
-    fn keys_order_like_correlations() {
-        let vals = [-2.0f32, -1.0, -0.3, 0.0, 0.2, 0.7, 0.99, 1.0];
-        for pair in vals.windows(2) {
-            assert!(key(pair[0]) < key(pair[1]));
+    fn queue_pops_by_decreasing_level() {
+        let mut q = BucketQueue::new();
+        q.reset(0.5);
+        for (i, c) in [0.6f32, 0.99, 0.5, 1.0, 0.75, 0.8].into_iter().enumerate() {
+            q.push(Candidate {
+                idx: i as u32,
+                d: 0,
+                c,
+            });
         }
-        for v in vals {
-            assert!((value(key(v)) - v).abs() < 1e-6);
-        }
+        let order: Vec<f32> = std::iter::from_fn(|| q.pop()).map(|c| c.c).collect();
+        assert_eq!(order, vec![1.0, 0.99, 0.8, 0.75, 0.6, 0.5]);
+        assert!(q.pop().is_none());
+        q.push(Candidate {
+            idx: 9,
+            d: 1,
+            c: 0.7,
+        });
+        assert_eq!(q.pop().map(|c| c.idx), Some(9));
     }
 
     #[test]

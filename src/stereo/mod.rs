@@ -18,7 +18,7 @@ mod grow;
 pub use correlation::Similarity;
 
 use crate::error::{ensure, Error, Result};
-use correlation::Correlator;
+use correlation::{Correlator, NO_CORRELATION};
 use grow::{random_seeds, Grower, SplitMix64, UNMATCHED};
 use rayon::prelude::*;
 
@@ -237,7 +237,7 @@ pub fn match_stereo_seeded(
         return Ok(StereoResult::empty(height, width)); // a uniform image: no texture
     };
     let user: Vec<(usize, usize, usize)> = seeds.iter().map(|s| (s.x, s.y, s.d)).collect();
-    let (mut disp_int, confidence, seeds_used) = grow_pass(&corr, config, max_d, &user);
+    let (mut disp_int, confidence, seeds_used, grower) = grow_pass(&corr, config, max_d, &user);
 
     if config.lr_check {
         let flip = |img: &[f32]| -> Vec<f32> {
@@ -256,7 +256,7 @@ pub fn match_stereo_seeded(
             config.similarity,
         )
         .expect("both images have texture: the forward pass built its correlator");
-        let (disp_back, _, _) = grow_pass(&back, config, max_d, &[]);
+        let (disp_back, _, _, _) = grow_pass(&back, config, max_d, &[]);
         left_right_check(&mut disp_int, &disp_back, width);
     }
     if config.min_segment > 0 {
@@ -278,7 +278,8 @@ pub fn match_stereo_seeded(
                 }
                 let d = d as usize;
                 let offset = if config.subpixel {
-                    subpixel_offset(&corr, x, y, d, max_d)
+                    let top = max_d.min(corr.max_disparity_at(x));
+                    subpixel_offset(grower.scores_around(&corr, x, y, d, top))
                 } else {
                     0.0
                 };
@@ -294,13 +295,14 @@ pub fn match_stereo_seeded(
     })
 }
 
-/// Seeds + growing on one correlator: integer disparities, confidences, seeds used.
+/// Seeds + growing on one correlator: integer disparities, confidences, seeds used,
+/// and the grower (its cache serves the subpixel step).
 fn grow_pass(
     corr: &Correlator,
     config: &StereoConfig,
     max_d: usize,
     user: &[(usize, usize, usize)],
-) -> (Vec<i32>, Vec<f32>, usize) {
+) -> (Vec<i32>, Vec<f32>, usize, Grower) {
     let mut rng = SplitMix64::new(config.rng_seed);
     let found = random_seeds(
         corr,
@@ -315,7 +317,8 @@ fn grow_pass(
     let n = corr.width() * corr.height();
     let mut disparity = vec![UNMATCHED; n];
     let mut confidence = vec![f32::NAN; n];
-    Grower::new().grow(
+    let mut grower = Grower::new();
+    grower.grow(
         corr,
         &all,
         max_d,
@@ -323,7 +326,7 @@ fn grow_pass(
         &mut disparity,
         &mut confidence,
     );
-    (disparity, confidence, all.len())
+    (disparity, confidence, all.len(), grower)
 }
 
 /// Unmatches left pixels whose match is not confirmed by the mirrored (right-to-left)
@@ -391,18 +394,13 @@ fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size
     }
 }
 
-/// Vertex offset in (−0.5, 0.5) of the parabola through the correlations at d − 1, d,
-/// d + 1; 0 at the ends of the range or where the three do not peak at d.
-fn subpixel_offset(corr: &Correlator, x: usize, y: usize, d: usize, max_d: usize) -> f32 {
-    let top = max_d.min(corr.max_disparity_at(x));
-    if d == 0 || d + 1 > top {
+/// Vertex offset in [−0.5, 0.5] of the parabola through the correlations at d − 1, d,
+/// d + 1; 0 at the ends of the range (`NO_CORRELATION` there) or where the three do not
+/// peak at d.
+fn subpixel_offset([cm, c0, cp]: [f32; 3]) -> f32 {
+    if cm == NO_CORRELATION || cp == NO_CORRELATION {
         return 0.0;
     }
-    let (cm, c0, cp) = (
-        corr.score(x, y, d - 1),
-        corr.score(x, y, d),
-        corr.score(x, y, d + 1),
-    );
     let curvature = cm - 2.0 * c0 + cp;
     if curvature.is_nan() || curvature >= 0.0 {
         return 0.0;
