@@ -9,6 +9,7 @@
 
 use super::correlation::Correlator;
 use rayon::prelude::*;
+use std::ops::Range;
 
 /// Value of the integer disparity map where a pixel has no match.
 pub const UNMATCHED: i32 = -1;
@@ -167,60 +168,79 @@ pub fn random_seeds(
         .collect()
 }
 
+/// Largest disparity the grower can store (its per-pixel state holds 16-bit values).
+pub const DISPARITY_LIMIT: usize = i16::MAX as usize;
+
+/// Per left pixel: its match (or `NO_MATCH`) and a cache of the correlations at
+/// disparities `cached_d` − 1, `cached_d`, `cached_d` + 1 (`cached_d` = `NOT_CACHED`
+/// when empty). Neighbours usually grow into a pixel with the same d, and the subpixel
+/// step needs the same three values; 16 bytes keep one pixel in one cache line.
+#[derive(Clone, Copy)]
+struct Cell {
+    disp: i16,
+    cached_d: u16,
+    scores: [f32; 3],
+}
+
+const NO_MATCH: i16 = -1;
+const NOT_CACHED: u16 = u16::MAX;
+const EMPTY_CELL: Cell = Cell {
+    disp: NO_MATCH,
+    cached_d: NOT_CACHED,
+    scores: [0.0; 3],
+};
+
 /// Reusable state of the growing stage.
 pub struct Grower {
     queue: BucketQueue,
     right_used: Vec<bool>,
-    /// Per left pixel, the disparity d whose correlations at d − 1, d, d + 1 are in
-    /// `cached` (`NOT_CACHED` if none): neighbours usually grow into a pixel with the
-    /// same d, and subpixel refinement needs the same three values.
-    cached_d: Vec<u32>,
-    cached: Vec<[f32; 3]>,
+    cells: Vec<Cell>,
+    /// The rows this grower works on: matches never grow out of them. Rows are
+    /// independent for uniqueness (epipolar lines), so bands can grow in parallel.
+    rows: Range<usize>,
 }
-
-/// Marks an empty entry of the correlation cache.
-const NOT_CACHED: u32 = u32::MAX;
 
 impl Grower {
     pub fn new() -> Self {
         Grower {
             queue: BucketQueue::new(),
             right_used: Vec::new(),
-            cached_d: Vec::new(),
-            cached: Vec::new(),
+            cells: Vec::new(),
+            rows: 0..0,
         }
     }
 
-    /// Grows matches from `seeds` (x, y, d); writes the integer disparity (or
-    /// `UNMATCHED`) and the correlation of every left pixel into `disparity` and
-    /// `confidence`. Only candidates with correlation ≥ `threshold` are accepted, and
-    /// no disparity above `max_d`.
+    /// Grows matches from `seeds` (x, y, d) within `rows`. Only candidates with
+    /// correlation ≥ `threshold` are accepted, and no disparity above `max_d`
+    /// (≤ `DISPARITY_LIMIT`). Seeds outside `rows` are ignored. Read the result with
+    /// [`Grower::disparity`].
     pub fn grow(
         &mut self,
         corr: &Correlator,
         seeds: &[(usize, usize, usize)],
         max_d: usize,
         threshold: f32,
-        disparity: &mut [i32],
-        confidence: &mut [f32],
+        rows: Range<usize>,
     ) {
         let w = corr.width();
-        let n = w * corr.height();
-        disparity.fill(UNMATCHED);
-        confidence.fill(f32::NAN);
+        let rows = rows.start.min(corr.height())..rows.end.min(corr.height());
+        let n = w * rows.len();
+        // Indices below are relative to the band's first pixel.
+        let first = rows.start * w;
+        self.rows = rows.clone();
+        let max_d = max_d.min(DISPARITY_LIMIT);
         self.right_used.clear();
         self.right_used.resize(n, false);
+        self.cells.clear();
+        self.cells.resize(n, EMPTY_CELL);
         self.queue.reset(threshold);
-        self.cached_d.clear();
-        self.cached_d.resize(n, NOT_CACHED);
-        self.cached.resize(n, [0.0; 3]);
 
         for &(x, y, d) in seeds {
-            if corr.inside(x, y) && d <= max_d.min(corr.max_disparity_at(x)) {
+            if rows.contains(&y) && corr.inside(x, y) && d <= max_d.min(corr.max_disparity_at(x)) {
                 let c = corr.score(x, y, d);
                 if c >= threshold {
                     self.queue.push(Candidate {
-                        idx: (y * w + x) as u32,
+                        idx: (y * w + x - first) as u32,
                         d: d as u32,
                         c,
                     });
@@ -230,13 +250,12 @@ impl Grower {
 
         while let Some(cand) = self.queue.pop() {
             let (idx, d) = (cand.idx as usize, cand.d as usize);
-            if disparity[idx] != UNMATCHED || self.right_used[idx - d] {
+            if self.cells[idx].disp != NO_MATCH || self.right_used[idx - d] {
                 continue; // uniqueness: one of the two pixels is taken already
             }
-            disparity[idx] = d as i32;
-            confidence[idx] = cand.c;
+            self.cells[idx].disp = d as i16;
             self.right_used[idx - d] = true;
-            let (x, y) = (idx % w, idx / w);
+            let (x, y) = (idx % w, rows.start + idx / w);
             let neighbours = [
                 (x.wrapping_sub(1), y),
                 (x + 1, y),
@@ -244,27 +263,24 @@ impl Grower {
                 (x, y + 1),
             ];
             for (nx, ny) in neighbours {
-                if !corr.inside(nx, ny) {
+                if !corr.inside(nx, ny) || !rows.contains(&ny) {
                     continue;
                 }
-                let nidx = ny * w + nx;
-                if disparity[nidx] != UNMATCHED {
+                let nidx = ny * w + nx - first;
+                let cell = &mut self.cells[nidx];
+                if cell.disp != NO_MATCH {
                     continue;
                 }
                 let top = max_d.min(corr.max_disparity_at(nx));
                 if d > top + 1 {
                     continue; // even d − 1 is out of range here
                 }
-                let scores = if self.cached_d[nidx] == d as u32 {
-                    self.cached[nidx]
-                } else {
-                    let s = corr.score3(nx, ny, d, top);
-                    self.cached_d[nidx] = d as u32;
-                    self.cached[nidx] = s;
-                    s
-                };
+                if cell.cached_d != d as u16 {
+                    cell.scores = corr.score3(nx, ny, d, top);
+                    cell.cached_d = d as u16;
+                }
                 let (mut best_d, mut best) = (0usize, f32::NEG_INFINITY);
-                for (k, &c) in scores.iter().enumerate() {
+                for (k, &c) in cell.scores.iter().enumerate() {
                     let Some(nd) = (d + k).checked_sub(1) else {
                         continue;
                     };
@@ -283,9 +299,19 @@ impl Grower {
             }
         }
     }
-}
 
-impl Grower {
+    /// The integer disparity of every left pixel of its rows after [`Grower::grow`],
+    /// `UNMATCHED` where none, appended to `out`.
+    pub fn disparity(&self, out: &mut Vec<i32>) {
+        out.extend(self.cells.iter().map(|c| {
+            if c.disp == NO_MATCH {
+                UNMATCHED
+            } else {
+                c.disp as i32
+            }
+        }));
+    }
+
     /// Correlations at d − 1, d, d + 1 of left pixel (x, y) after [`Grower::grow`]
     /// (from the cache when there), `NO_CORRELATION` outside 0..=top.
     pub fn scores_around(
@@ -296,11 +322,12 @@ impl Grower {
         d: usize,
         top: usize,
     ) -> [f32; 3] {
-        let idx = y * corr.width() + x;
-        if self.cached_d.get(idx) == Some(&(d as u32)) {
-            self.cached[idx]
-        } else {
-            corr.score3(x, y, d, top)
+        if !self.rows.contains(&y) {
+            return corr.score3(x, y, d, top);
+        }
+        match self.cells.get((y - self.rows.start) * corr.width() + x) {
+            Some(cell) if cell.cached_d as usize == d => cell.scores,
+            _ => corr.score3(x, y, d, top),
         }
     }
 }

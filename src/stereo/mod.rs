@@ -19,11 +19,17 @@ pub use correlation::Similarity;
 
 use crate::error::{ensure, Error, Result};
 use correlation::{Correlator, NO_CORRELATION};
-use grow::{random_seeds, Grower, SplitMix64, UNMATCHED};
+use grow::{random_seeds, Grower, SplitMix64, DISPARITY_LIMIT, UNMATCHED};
 use rayon::prelude::*;
 
 /// Largest accepted window side (pixels): beyond it the matcher is needlessly slow.
 pub const MAX_WINDOW: usize = 31;
+
+/// Rows per band: bands grow independently and in parallel (uniqueness couples only
+/// pixels of one row, so a band is a self-contained problem; a surface split by a band
+/// border is grown from the seeds on each side). Fixed, so results do not depend on
+/// the number of threads.
+pub const BAND_ROWS: usize = 96;
 
 /// Largest disparity difference (px) between a left match and the right match it
 /// points to for the left–right check to keep it.
@@ -42,7 +48,8 @@ pub struct StereoConfig {
     pub threshold: f32,
     /// Number of random seed pixels matched by exhaustive search.
     pub num_seeds: usize,
-    /// Largest disparity considered; `None` for the whole epipolar line.
+    /// Largest disparity considered; `None` for the whole epipolar line (at most
+    /// 32767 px either way).
     pub max_disparity: Option<usize>,
     /// Seed distinctness ρ in (0, 1]: a seed is kept only if the best match outside
     /// d ± 1 leaves at least 1/ρ times its dissimilarity (1 − c). 1 disables the test.
@@ -207,6 +214,7 @@ pub fn match_stereo_seeded(
     ensure(max_d < width, "max_disparity", || {
         format!("must be below the image width {width}, got {max_d}")
     })?;
+    let max_d = max_d.min(DISPARITY_LIMIT);
     for (i, s) in seeds.iter().enumerate() {
         ensure(s.x < width && s.y < height && s.d <= s.x, "seeds", || {
             format!(
@@ -237,7 +245,7 @@ pub fn match_stereo_seeded(
         return Ok(StereoResult::empty(height, width)); // a uniform image: no texture
     };
     let user: Vec<(usize, usize, usize)> = seeds.iter().map(|s| (s.x, s.y, s.d)).collect();
-    let (mut disp_int, confidence, seeds_used, grower) = grow_pass(&corr, config, max_d, &user);
+    let (mut disp_int, seeds_used, growers) = grow_pass(&corr, config, max_d, &user);
 
     if config.lr_check {
         let flip = |img: &[f32]| -> Vec<f32> {
@@ -256,30 +264,32 @@ pub fn match_stereo_seeded(
             config.similarity,
         )
         .expect("both images have texture: the forward pass built its correlator");
-        let (disp_back, _, _, _) = grow_pass(&back, config, max_d, &[]);
+        let (disp_back, _, _) = grow_pass(&back, config, max_d, &[]);
         left_right_check(&mut disp_int, &disp_back, width);
     }
     if config.min_segment > 0 {
         remove_small_segments(&mut disp_int, width, height, config.min_segment);
     }
 
+    // Confidence = correlation at d; subpixel offset from d − 1, d, d + 1 (cached).
     let mut disparity = vec![f32::NAN; width * height];
-    let mut conf = confidence;
+    let mut confidence = vec![f32::NAN; width * height];
     disparity
         .par_chunks_mut(width)
-        .zip(conf.par_chunks_mut(width))
+        .zip(confidence.par_chunks_mut(width))
         .zip(disp_int.par_chunks(width))
         .enumerate()
         .for_each(|(y, ((drow, crow), irow))| {
             for (x, ((dv, cv), &d)) in drow.iter_mut().zip(crow).zip(irow).enumerate() {
                 if d == UNMATCHED {
-                    *cv = f32::NAN;
                     continue;
                 }
                 let d = d as usize;
+                let top = max_d.min(corr.max_disparity_at(x));
+                let scores = growers[y / BAND_ROWS].scores_around(&corr, x, y, d, top);
+                *cv = scores[1];
                 let offset = if config.subpixel {
-                    let top = max_d.min(corr.max_disparity_at(x));
-                    subpixel_offset(grower.scores_around(&corr, x, y, d, top))
+                    subpixel_offset(scores)
                 } else {
                     0.0
                 };
@@ -288,21 +298,22 @@ pub fn match_stereo_seeded(
         });
     Ok(StereoResult {
         disparity,
-        confidence: conf,
+        confidence,
         height,
         width,
         seeds_used,
     })
 }
 
-/// Seeds + growing on one correlator: integer disparities, confidences, seeds used,
-/// and the grower (its cache serves the subpixel step).
+/// Seeds + growing on one correlator, in bands of `BAND_ROWS` rows grown in parallel:
+/// integer disparities, seeds used, and the growers of the bands (their correlation
+/// caches serve the subpixel step).
 fn grow_pass(
     corr: &Correlator,
     config: &StereoConfig,
     max_d: usize,
     user: &[(usize, usize, usize)],
-) -> (Vec<i32>, Vec<f32>, usize, Grower) {
+) -> (Vec<i32>, usize, Vec<Grower>) {
     let mut rng = SplitMix64::new(config.rng_seed);
     let found = random_seeds(
         corr,
@@ -314,19 +325,21 @@ fn grow_pass(
     );
     let mut all: Vec<(usize, usize, usize)> = user.to_vec();
     all.extend(found.iter().map(|&(x, y, d, _)| (x, y, d)));
-    let n = corr.width() * corr.height();
-    let mut disparity = vec![UNMATCHED; n];
-    let mut confidence = vec![f32::NAN; n];
-    let mut grower = Grower::new();
-    grower.grow(
-        corr,
-        &all,
-        max_d,
-        config.threshold,
-        &mut disparity,
-        &mut confidence,
-    );
-    (disparity, confidence, all.len(), grower)
+    let height = corr.height();
+    let growers: Vec<Grower> = (0..height.div_ceil(BAND_ROWS))
+        .into_par_iter()
+        .map(|band| {
+            let rows = band * BAND_ROWS..((band + 1) * BAND_ROWS).min(height);
+            let mut grower = Grower::new();
+            grower.grow(corr, &all, max_d, config.threshold, rows);
+            grower
+        })
+        .collect();
+    let mut disparity = Vec::with_capacity(corr.width() * height);
+    for g in &growers {
+        g.disparity(&mut disparity);
+    }
+    (disparity, all.len(), growers)
 }
 
 /// Unmatches left pixels whose match is not confirmed by the mirrored (right-to-left)

@@ -446,3 +446,26 @@ proptest! {
         prop_assert!(a.matched() * 2 > (w - 12) * (h - 4));
     }
 }
+
+#[test]
+fn tall_images_grow_in_bands_without_seams() {
+    // Taller than two bands: every band must be grown, and rows next to the band
+    // borders must be matched like any other.
+    let (w, h) = (40, 2 * BAND_ROWS + 30);
+    let (left, right, truth, _) = random_dots(w, h, 5, 5, (0, 0, 0, 0));
+    let cfg = StereoConfig {
+        max_disparity: Some(10),
+        num_seeds: 60,
+        ..Default::default()
+    };
+    let res = match_stereo(&left, &right, h, w, &cfg).unwrap();
+    let (n, m, errs) = errors(&res, &truth, |i| inside(i, w, h) && i % w >= 10);
+    assert!(m * 100 >= 99 * n, "density {m}/{n}");
+    assert!(errs.iter().all(|&e| e < 0.5));
+    for y in [BAND_ROWS - 1, BAND_ROWS, 2 * BAND_ROWS - 1, 2 * BAND_ROWS] {
+        assert!(
+            (10..w - 2).all(|x| !res.disparity[y * w + x].is_nan()),
+            "row {y}"
+        );
+    }
+}
