@@ -65,6 +65,12 @@ pub struct StereoConfig {
     pub lr_check: bool,
     /// Subpixel refinement by a parabola through the correlations at d − 1, d, d + 1.
     pub subpixel: bool,
+    /// Fill one-pixel gaps between two horizontal neighbours whose disparities differ
+    /// by at most 1, with whichever of their disparities correlates better (if ≥ the
+    /// threshold). On a surface slanted in depth, n left pixels see fewer than n right
+    /// pixels, so integer uniqueness leaves such gaps; the filled pixel shares its right
+    /// pixel with a neighbour.
+    pub fill_gaps: bool,
     /// Matched segments (4-connected, disparity steps ≤ 1) smaller than this many
     /// pixels are removed; 0 keeps everything.
     pub min_segment: usize,
@@ -84,6 +90,7 @@ impl Default for StereoConfig {
             similarity: Similarity::Mncc,
             lr_check: false,
             subpixel: true,
+            fill_gaps: true,
             min_segment: 0,
             rng_seed: 0,
         }
@@ -267,6 +274,9 @@ pub fn match_stereo_seeded(
         let (disp_back, _, _) = grow_pass(&back, config, max_d, &[]);
         left_right_check(&mut disp_int, &disp_back, width);
     }
+    if config.fill_gaps {
+        fill_gaps(&mut disp_int, &corr, max_d, config.threshold);
+    }
     if config.min_segment > 0 {
         remove_small_segments(&mut disp_int, width, height, config.min_segment);
     }
@@ -358,6 +368,35 @@ fn left_right_check(disp: &mut [i32], back: &[i32], width: usize) {
                 }
             }
         });
+}
+
+/// Fills one-pixel horizontal gaps (see [`StereoConfig::fill_gaps`]).
+fn fill_gaps(disp: &mut [i32], corr: &Correlator, max_d: usize, threshold: f32) {
+    let width = corr.width();
+    disp.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+        for x in 1..width.saturating_sub(1) {
+            let (dl, dr) = (row[x - 1], row[x + 1]);
+            // No chains: filling x needs x + 1 matched, so a filled pixel never
+            // borders another gap.
+            if row[x] != UNMATCHED || dl == UNMATCHED || dr == UNMATCHED {
+                continue;
+            }
+            if (dl - dr).abs() > 1 || !corr.inside(x, y) {
+                continue;
+            }
+            let top = max_d.min(corr.max_disparity_at(x)) as i32;
+            let mut best = (UNMATCHED, threshold);
+            for d in [dl, dr] {
+                if d <= top {
+                    let c = corr.score(x, y, d as usize);
+                    if c >= best.1 {
+                        best = (d, c);
+                    }
+                }
+            }
+            row[x] = best.0;
+        }
+    });
 }
 
 /// Unmatches 4-connected segments (neighbour disparities within `SEGMENT_STEP`) of
