@@ -34,6 +34,7 @@ def match(
     return_confidence: Literal[False] = ...,
     lr_check: bool = ...,
     subpixel: bool = ...,
+    fill_gaps: bool = ...,
     min_segment: Optional[int] = ...,
     similarity: str = ...,
 ) -> NDArray[np.float32]: ...
@@ -53,6 +54,7 @@ def match(
     return_confidence: Literal[True],
     lr_check: bool = ...,
     subpixel: bool = ...,
+    fill_gaps: bool = ...,
     min_segment: Optional[int] = ...,
     similarity: str = ...,
 ) -> _Pair: ...
@@ -71,6 +73,7 @@ def match(
     return_confidence: bool = False,
     lr_check: bool = False,
     subpixel: bool = True,
+    fill_gaps: bool = True,
     min_segment: Optional[int] = None,
     similarity: str = "mncc",
 ) -> Union[NDArray[np.float32], _Pair]:
@@ -83,6 +86,7 @@ def match(
     ``seeds``: extra seeds, an (N, 3) array of rows (x, y, d). ``seed``: RNG seed.
     ``return_confidence``: also return the correlation of each match (NaN unmatched).
     ``lr_check``: keep only matches confirmed right-to-left (twice the time).
+    ``fill_gaps``: fill one-pixel gaps that integer uniqueness leaves on slanted surfaces.
     ``min_segment``: drop matched segments smaller than this many pixels.
     A uniform (textureless) pair gives an all-NaN result, not an error.
     """
@@ -97,6 +101,7 @@ def match(
         seed=seed,
         lr_check=lr_check,
         subpixel=subpixel,
+        fill_gaps=fill_gaps,
         min_segment=min_segment,
         similarity=similarity,
     )
