@@ -82,16 +82,16 @@ impl Default for StereoConfig {
     fn default() -> Self {
         StereoConfig {
             window: 5,
-            threshold: 0.6,
+            threshold: 0.45,
             num_seeds: 2000,
             max_disparity: None,
             seed_distinctness: 0.8,
-            min_texture: 0.01,
+            min_texture: 0.005,
             similarity: Similarity::Mncc,
             lr_check: false,
             subpixel: true,
             fill_gaps: true,
-            min_segment: 0,
+            min_segment: 200,
             rng_seed: 0,
         }
     }

@@ -253,6 +253,7 @@ fn left_right_check_keeps_correct_matches_and_drops_occlusions() {
     let cfg = StereoConfig {
         max_disparity: Some(16),
         lr_check: true,
+        threshold: 0.6,
         ..Default::default()
     };
     let res = match_stereo(&left, &right, h, w, &cfg).unwrap();
