@@ -213,6 +213,36 @@ impl Correlator {
     /// right window at d + 1 inside the image).
     #[inline]
     fn cross3(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        // Common window sides get fixed-size loops the compiler unrolls and vectorises.
+        match self.half {
+            1 => self.cross3_fixed::<3>(x, y, d),
+            2 => self.cross3_fixed::<5>(x, y, d),
+            3 => self.cross3_fixed::<7>(x, y, d),
+            _ => self.cross3_any(x, y, d),
+        }
+    }
+
+    #[inline]
+    fn cross3_fixed<const SIDE: usize>(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        let (w, h) = (self.width, self.half);
+        let mut sums = [0.0f32; 3];
+        for row in y - h..=y + h {
+            let start = row * w + x - h;
+            let l: &[f32; SIDE] = self.left[start..start + SIDE].try_into().expect("SIDE");
+            let r = &self.right[start - d - 1..start - d + 1 + SIDE];
+            for (k, sum) in sums.iter_mut().enumerate() {
+                let rk: &[f32; SIDE] = r[k..k + SIDE].try_into().expect("SIDE");
+                let mut acc = 0.0f32;
+                for i in 0..SIDE {
+                    acc += l[i] * rk[i];
+                }
+                *sum += acc;
+            }
+        }
+        sums
+    }
+
+    fn cross3_any(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
         let (w, h) = (self.width, self.half);
         let side = 2 * h + 1;
         let mut sums = [0.0f32; 3];
@@ -342,20 +372,22 @@ mod tests {
         let (w, h) = (30, 12);
         let l = noise(w * h, 4);
         let r = noise(w * h, 5);
-        let c = Correlator::new(&l, &r, w, h, 2, 1e-3, Similarity::Mncc).unwrap();
-        for (x, y) in [(20, 5), (27, 9), (3, 2), (10, 6)] {
-            let top = c.max_disparity_at(x).min(12);
-            for d in 0..=top {
-                let got = c.score3(x, y, d, top);
-                for (k, &g) in got.iter().enumerate() {
-                    let want = match (d + k).checked_sub(1) {
-                        Some(dd) if dd <= top => c.score(x, y, dd),
-                        _ => NO_CORRELATION,
-                    };
-                    assert!(
-                        (g - want).abs() < 1e-5,
-                        "({x},{y}) d={d} k={k}: {g} vs {want}"
-                    );
+        for half in 1..=4 {
+            let c = Correlator::new(&l, &r, w, h, half, 1e-3, Similarity::Mncc).unwrap();
+            for (x, y) in [(20, 5), (25, 7), (half, half), (10, 6)] {
+                let top = c.max_disparity_at(x).min(12);
+                for d in 0..=top {
+                    let got = c.score3(x, y, d, top);
+                    for (k, &g) in got.iter().enumerate() {
+                        let want = match (d + k).checked_sub(1) {
+                            Some(dd) if dd <= top => c.score(x, y, dd),
+                            _ => NO_CORRELATION,
+                        };
+                        assert!(
+                            (g - want).abs() < 1e-5,
+                            "({x},{y}) d={d} k={k}: {g} vs {want}"
+                        );
+                    }
                 }
             }
         }
