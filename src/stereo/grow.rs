@@ -105,33 +105,39 @@ impl SplitMix64 {
 
 /// The best disparity of left pixel (x, y) by exhaustive search over 0..=max_d, with
 /// its correlation, if it is distinct: the best correlation outside d ± 1 must leave at
-/// least `1 / distinctness` times more dissimilarity (1 − c) than the best.
+/// least `1 / distinctness` times more dissimilarity (1 − c) than the best. `scores` is
+/// scratch space (reused between calls).
 pub fn search_line(
     corr: &Correlator,
     x: usize,
     y: usize,
     max_d: usize,
     distinctness: f32,
+    scores: &mut Vec<f32>,
 ) -> Option<(usize, f32)> {
     let top = max_d.min(corr.max_disparity_at(x));
-    let (mut best_d, mut best) = (0usize, f32::NEG_INFINITY);
-    // Scores are kept only to find the runner-up away from the best; the line is short
-    // and seeds are few, so a second pass is cheaper than storing them.
-    for d in 0..=top {
-        let c = corr.score(x, y, d);
-        if c > best {
-            best = c;
-            best_d = d;
-        }
-    }
+    scores.clear();
+    scores.extend((0..=top).map(|d| corr.score(x, y, d)));
+    let (best_d, best) =
+        scores
+            .iter()
+            .copied()
+            .enumerate()
+            .fold(
+                (0, f32::NEG_INFINITY),
+                |a, (d, c)| if c > a.1 { (d, c) } else { a },
+            );
     if !best.is_finite() {
         return None;
     }
-    let runner_up = (0..=top)
-        .filter(|&d| d + 1 < best_d || d > best_d + 1)
-        .map(|d| corr.score(x, y, d))
+    let runner_up = scores
+        .iter()
+        .enumerate()
+        .filter(|&(d, _)| d + 1 < best_d || d > best_d + 1)
+        .map(|(_, &c)| c)
         .fold(f32::NEG_INFINITY, f32::max);
-    let distinct = (1.0 - best) <= distinctness * (1.0 - runner_up);
+    // Strict, so two perfect matches are ambiguous; ρ = 1 turns the test off.
+    let distinct = distinctness >= 1.0 || (1.0 - best) < distinctness * (1.0 - runner_up);
     distinct.then_some((best_d, best))
 }
 
@@ -161,10 +167,11 @@ pub fn random_seeds(
     pixels
         .par_iter()
         .filter(|&&(x, y)| corr.left_textured(x, y))
-        .filter_map(|&(x, y)| {
-            let (d, c) = search_line(corr, x, y, max_d, distinctness)?;
+        .map_init(Vec::new, |scores, &(x, y)| {
+            let (d, c) = search_line(corr, x, y, max_d, distinctness, scores)?;
             (c >= threshold).then_some((x, y, d, c))
         })
+        .flatten()
         .collect()
 }
 
@@ -340,6 +347,7 @@ impl Default for Grower {
 
 #[cfg(test)]
 mod tests {
+    use super::super::correlation::Similarity;
     use super::*;
 
     #[test]
@@ -362,6 +370,38 @@ mod tests {
             c: 0.7,
         });
         assert_eq!(q.pop().map(|c| c.idx), Some(9));
+    }
+
+    #[test]
+    fn seed_search_finds_the_shift_and_refuses_repetitive_texture() {
+        let (w, h, shift) = (60, 9, 7);
+        let mut rng = SplitMix64::new(3);
+        let right: Vec<f32> = (0..w * h).map(|_| rng.below(100) as f32).collect();
+        let left: Vec<f32> = (0..w * h)
+            .map(|i| {
+                if i % w >= shift {
+                    right[i - shift]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let corr = Correlator::new(&left, &right, w, h, 2, 0.01, Similarity::Mncc).unwrap();
+        let mut scratch = Vec::new();
+        let (d, c) = search_line(&corr, 40, 4, 30, 0.8, &mut scratch).unwrap();
+        assert_eq!(d, shift);
+        assert!(c > 0.95); // not 1: the two images are normalised by different global gains
+                           // A texture repeating every 6 columns (plus independent noise in each image)
+                           // matches about equally well at d and d ± 6.
+        let mut stripes = || -> Vec<f32> {
+            (0..w * h)
+                .map(|i| ((i % w) % 6) as f32 + rng.below(100) as f32 / 100.0)
+                .collect()
+        };
+        let (a, b) = (stripes(), stripes());
+        let corr = Correlator::new(&a, &b, w, h, 2, 0.01, Similarity::Mncc).unwrap();
+        assert!(search_line(&corr, 40, 4, 30, 0.8, &mut scratch).is_none());
+        assert!(search_line(&corr, 40, 4, 30, 1.0, &mut scratch).is_some());
     }
 
     #[test]
