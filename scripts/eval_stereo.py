@@ -26,10 +26,9 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Optional
+from typing import Callable
 
 import numpy as np
-
 from depthpose import _core
 from depthpose.stereo import match
 
@@ -128,12 +127,10 @@ def timed(fn: Callable[[], np.ndarray], repeat: int) -> tuple[np.ndarray, float,
 
 
 def ours(pair: Pair, **options: object) -> Callable[[], np.ndarray]:
-    return lambda: match(
-        pair.left, pair.right, max_disparity=pair.num_disparities - 1, **options
-    )
+    return lambda: match(pair.left, pair.right, max_disparity=pair.num_disparities - 1, **options)
 
 
-def sgbm(pair: Pair) -> Optional[Callable[[], np.ndarray]]:
+def sgbm(pair: Pair) -> Callable[[], np.ndarray] | None:
     try:
         import cv2
     except ImportError:
@@ -187,7 +184,7 @@ def table(rows: list[tuple[str, str, Score]]) -> str:
     return "\n".join(lines)
 
 
-def main(argv: Optional[list[str]] = None) -> int:
+def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder with the pairs")
     p.add_argument("--repeat", type=int, default=5, help="timed runs per method (best kept)")

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from depthpose import _core
 from depthpose.stereo import cli_stereo, depth_from_disparity, match
 
@@ -119,7 +118,9 @@ def test_cli_writes_disparity_and_depth(tmp_path):
         paths.append(str(p))
     out, depth = tmp_path / "d.npy", tmp_path / "z.png"
     argv = [*paths, "--out", str(out), "--max-disparity", "20"]
-    assert cli_stereo([*argv, "--depth-out", str(depth), "--focal", "500", "--baseline", "0.1"]) == 0
+    assert (
+        cli_stereo([*argv, "--depth-out", str(depth), "--focal", "500", "--baseline", "0.1"]) == 0
+    )
     disp = np.load(out)
     assert disp.shape == left.shape and np.isfinite(disp).mean() > 0.7
     z = _core.read_depth_image(str(depth))
