@@ -15,8 +15,8 @@ CONES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "ste
 
 # What the matcher reaches on cones (disparities 0..63), with a little slack; measured
 # with scripts/eval_stereo.py (see docs/stereo.md).
-CONES_MIN_DENSITY = 0.85
-CONES_MAX_BAD2 = 0.08
+CONES_MIN_DENSITY = 0.83
+CONES_MAX_BAD2 = 0.05
 
 
 def random_dots(h: int = 60, w: int = 90, d_back: int = 4, d_front: int = 12, seed: int = 1):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Literal, Optional, Union, overload
+from typing import Literal, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -25,16 +25,17 @@ def match(
     left: ArrayLike,
     right: ArrayLike,
     *,
-    max_disparity: Optional[int] = ...,
+    max_disparity: int | None = ...,
     window: int = ...,
-    threshold: Optional[float] = ...,
-    num_seeds: Optional[int] = ...,
-    seeds: Optional[ArrayLike] = ...,
+    threshold: float | None = ...,
+    num_seeds: int | None = ...,
+    seeds: ArrayLike | None = ...,
     seed: int = ...,
     return_confidence: Literal[False] = ...,
     lr_check: bool = ...,
     subpixel: bool = ...,
-    min_segment: Optional[int] = ...,
+    fill_gaps: bool = ...,
+    min_segment: int | None = ...,
     similarity: str = ...,
 ) -> NDArray[np.float32]: ...
 
@@ -44,16 +45,17 @@ def match(
     left: ArrayLike,
     right: ArrayLike,
     *,
-    max_disparity: Optional[int] = ...,
+    max_disparity: int | None = ...,
     window: int = ...,
-    threshold: Optional[float] = ...,
-    num_seeds: Optional[int] = ...,
-    seeds: Optional[ArrayLike] = ...,
+    threshold: float | None = ...,
+    num_seeds: int | None = ...,
+    seeds: ArrayLike | None = ...,
     seed: int = ...,
     return_confidence: Literal[True],
     lr_check: bool = ...,
     subpixel: bool = ...,
-    min_segment: Optional[int] = ...,
+    fill_gaps: bool = ...,
+    min_segment: int | None = ...,
     similarity: str = ...,
 ) -> _Pair: ...
 
@@ -62,28 +64,30 @@ def match(
     left: ArrayLike,
     right: ArrayLike,
     *,
-    max_disparity: Optional[int] = None,
+    max_disparity: int | None = None,
     window: int = 5,
-    threshold: Optional[float] = None,
-    num_seeds: Optional[int] = None,
-    seeds: Optional[ArrayLike] = None,
+    threshold: float | None = None,
+    num_seeds: int | None = None,
+    seeds: ArrayLike | None = None,
     seed: int = 0,
     return_confidence: bool = False,
     lr_check: bool = False,
     subpixel: bool = True,
-    min_segment: Optional[int] = None,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
     similarity: str = "mncc",
-) -> Union[NDArray[np.float32], _Pair]:
+) -> NDArray[np.float32] | _Pair:
     """Disparity (H, W) float32 of a rectified pair, NaN where unmatched.
 
     ``left``/``right``: gray (H, W) or colour (H, W, 3) arrays, uint8 or float, same shape.
     ``max_disparity``: largest disparity searched (default: the whole line).
     ``window``: odd side of the correlation window. ``threshold``: smallest accepted
-    correlation (default 0.6). ``num_seeds``: random seeds matched by exhaustive search.
+    correlation (default 0.45). ``num_seeds``: random seeds matched by exhaustive search.
     ``seeds``: extra seeds, an (N, 3) array of rows (x, y, d). ``seed``: RNG seed.
     ``return_confidence``: also return the correlation of each match (NaN unmatched).
     ``lr_check``: keep only matches confirmed right-to-left (twice the time).
-    ``min_segment``: drop matched segments smaller than this many pixels.
+    ``fill_gaps``: fill one-pixel gaps that integer uniqueness leaves on slanted surfaces.
+    ``min_segment``: drop matched segments smaller than this many pixels (default 200).
     A uniform (textureless) pair gives an all-NaN result, not an error.
     """
     disparity, confidence = _core.stereo_match(
@@ -97,6 +101,7 @@ def match(
         seed=seed,
         lr_check=lr_check,
         subpixel=subpixel,
+        fill_gaps=fill_gaps,
         min_segment=min_segment,
         similarity=similarity,
     )
@@ -116,7 +121,7 @@ def _array(a: ArrayLike) -> object:
     return a if isinstance(a, np.ndarray) else np.asarray(a)
 
 
-def write_pfm(path: Union[str, Path], image: NDArray[np.float32]) -> None:
+def write_pfm(path: str | Path, image: NDArray[np.float32]) -> None:
     """Writes a single-channel float image as PFM (little-endian, bottom row first);
     NaN is stored as +inf, the Middlebury convention for "unknown"."""
     img = np.where(np.isnan(image), np.inf, image).astype("<f4")

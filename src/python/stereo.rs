@@ -86,7 +86,7 @@ fn seeds_of(obj: &Bound<PyAny>) -> PyResult<Vec<Seed>> {
 /// accepted match, NaN unmatched) of a rectified pair by Growing Correspondence Seeds.
 #[pyfunction]
 #[pyo3(signature = (left, right, max_disparity=None, window=5, threshold=None, num_seeds=None,
-    seeds=None, seed=0, lr_check=false, subpixel=true, seed_distinctness=None,
+    seeds=None, seed=0, lr_check=false, subpixel=true, fill_gaps=true, seed_distinctness=None,
     min_texture=None, min_segment=None, similarity="mncc"))]
 #[allow(clippy::too_many_arguments)]
 fn stereo_match<'py>(
@@ -101,6 +101,7 @@ fn stereo_match<'py>(
     seed: u64,
     lr_check: bool,
     subpixel: bool,
+    fill_gaps: bool,
     seed_distinctness: Option<f32>,
     min_texture: Option<f32>,
     min_segment: Option<usize>,
@@ -127,6 +128,7 @@ fn stereo_match<'py>(
         similarity: similarity_of(similarity)?,
         lr_check,
         subpixel,
+        fill_gaps,
         min_segment: min_segment.unwrap_or(d.min_segment),
         rng_seed: seed,
     };

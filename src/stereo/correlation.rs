@@ -165,10 +165,100 @@ impl Correlator {
             return NO_CORRELATION;
         }
         let cov = self.cross(x, y, d) * self.inv_n - self.ml.mean[il] * self.mr.mean[ir];
+        self.similarity_of(cov, vl, vr)
+    }
+
+    /// Correlations at disparities d − 1, d, d + 1 (in that order); a disparity outside
+    /// 0..=top gets `NO_CORRELATION`. The three share one pass over the left window.
+    #[inline]
+    pub fn score3(&self, x: usize, y: usize, d: usize, top: usize) -> [f32; 3] {
+        if d == 0 || d + 1 > top {
+            let at = |dd: Option<usize>| match dd {
+                Some(v) if v <= top => self.score(x, y, v),
+                _ => NO_CORRELATION,
+            };
+            return [at(d.checked_sub(1)), at(Some(d)), at(Some(d + 1))];
+        }
+        let il = y * self.width + x;
+        let vl = self.ml.var[il];
+        if vl == 0.0 {
+            return [NO_CORRELATION; 3];
+        }
+        let cross = self.cross3(x, y, d);
+        let ml = self.ml.mean[il];
+        // cross3 returns the sums for d + 1, d, d − 1.
+        let mut out = [NO_CORRELATION; 3];
+        for (k, slot) in out.iter_mut().enumerate() {
+            let ir = il + 1 - d - k; // right pixel at disparity d − 1 + k
+            let vr = self.mr.var[ir];
+            *slot = if vr == 0.0 {
+                NO_CORRELATION
+            } else {
+                let cov = cross[2 - k] * self.inv_n - ml * self.mr.mean[ir];
+                self.similarity_of(cov, vl, vr)
+            };
+        }
+        out
+    }
+
+    #[inline]
+    fn similarity_of(&self, cov: f32, vl: f32, vr: f32) -> f32 {
         match self.similarity {
             Similarity::Mncc => 2.0 * cov / (vl + vr),
             Similarity::Ncc => cov / (vl * vr).sqrt(),
         }
+    }
+
+    /// Σ L·R over the window for disparities d + 1, d, d − 1 (needs d ≥ 1 and the
+    /// right window at d + 1 inside the image).
+    #[inline]
+    fn cross3(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        // Common window sides get fixed-size loops the compiler unrolls and vectorises.
+        match self.half {
+            1 => self.cross3_fixed::<3>(x, y, d),
+            2 => self.cross3_fixed::<5>(x, y, d),
+            3 => self.cross3_fixed::<7>(x, y, d),
+            _ => self.cross3_any(x, y, d),
+        }
+    }
+
+    #[inline]
+    fn cross3_fixed<const SIDE: usize>(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        let (w, h) = (self.width, self.half);
+        let mut sums = [0.0f32; 3];
+        for row in y - h..=y + h {
+            let start = row * w + x - h;
+            let l: &[f32; SIDE] = self.left[start..start + SIDE].try_into().expect("SIDE");
+            let r = &self.right[start - d - 1..start - d + 1 + SIDE];
+            for (k, sum) in sums.iter_mut().enumerate() {
+                let rk: &[f32; SIDE] = r[k..k + SIDE].try_into().expect("SIDE");
+                let mut acc = 0.0f32;
+                for i in 0..SIDE {
+                    acc += l[i] * rk[i];
+                }
+                *sum += acc;
+            }
+        }
+        sums
+    }
+
+    fn cross3_any(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        let (w, h) = (self.width, self.half);
+        let side = 2 * h + 1;
+        let mut sums = [0.0f32; 3];
+        for row in y - h..=y + h {
+            let start = row * w + x - h;
+            let l = &self.left[start..start + side];
+            let r = &self.right[start - d - 1..start - d + 1 + side];
+            for (k, sum) in sums.iter_mut().enumerate() {
+                *sum += l
+                    .iter()
+                    .zip(&r[k..k + side])
+                    .map(|(a, b)| a * b)
+                    .sum::<f32>();
+            }
+        }
+        sums
     }
 
     /// Σ L·R over the window pair (the only per-candidate work).
@@ -272,6 +362,32 @@ mod tests {
                         (got - want).abs() < 1e-4,
                         "{sim:?} h={half} ({x},{y},{d}): {got} vs {want}"
                     );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn score3_agrees_with_score() {
+        let (w, h) = (30, 12);
+        let l = noise(w * h, 4);
+        let r = noise(w * h, 5);
+        for half in 1..=4 {
+            let c = Correlator::new(&l, &r, w, h, half, 1e-3, Similarity::Mncc).unwrap();
+            for (x, y) in [(20, 5), (25, 7), (half, half), (10, 6)] {
+                let top = c.max_disparity_at(x).min(12);
+                for d in 0..=top {
+                    let got = c.score3(x, y, d, top);
+                    for (k, &g) in got.iter().enumerate() {
+                        let want = match (d + k).checked_sub(1) {
+                            Some(dd) if dd <= top => c.score(x, y, dd),
+                            _ => NO_CORRELATION,
+                        };
+                        assert!(
+                            (g - want).abs() < 1e-5,
+                            "({x},{y}) d={d} k={k}: {g} vs {want}"
+                        );
+                    }
                 }
             }
         }

@@ -9,28 +9,76 @@
 
 use super::correlation::Correlator;
 use rayon::prelude::*;
-use std::collections::BinaryHeap;
+use std::ops::Range;
 
 /// Value of the integer disparity map where a pixel has no match.
 pub const UNMATCHED: i32 = -1;
 
-/// A candidate in the queue: (ordered correlation bits, pixel index, disparity). The
-/// heap pops the largest correlation first; ties break on the index, so runs are
-/// deterministic.
-type Candidate = (u32, u32, u32);
+/// Number of correlation levels of the bucket queue between the threshold and 1.
+/// Candidates within one level (≈ 0.001 of correlation for τ = 0.6) pop in last-in
+/// first-out order; a binary heap would order them exactly but costs several times
+/// more per candidate.
+pub const QUEUE_LEVELS: usize = 512;
 
-/// Offset that makes every correlation (≥ `NO_CORRELATION` = −2) a positive float, whose
-/// IEEE bits then order like the values.
-const KEY_OFFSET: f32 = 4.0;
-
-#[inline]
-fn key(c: f32) -> u32 {
-    (c + KEY_OFFSET).to_bits()
+/// A candidate match: left pixel index, disparity, correlation.
+#[derive(Clone, Copy)]
+struct Candidate {
+    idx: u32,
+    d: u32,
+    c: f32,
 }
 
-#[inline]
-fn value(k: u32) -> f32 {
-    f32::from_bits(k) - KEY_OFFSET
+/// A monotone priority queue of candidates with correlation in [threshold, 1], bucketed
+/// into `QUEUE_LEVELS` levels: push and pop in O(1).
+struct BucketQueue {
+    buckets: Vec<Vec<Candidate>>,
+    top: usize,
+    len: usize,
+    floor: f32,
+    scale: f32,
+}
+
+impl BucketQueue {
+    fn new() -> Self {
+        BucketQueue {
+            buckets: (0..QUEUE_LEVELS).map(|_| Vec::new()).collect(),
+            top: 0,
+            len: 0,
+            floor: 0.0,
+            scale: 1.0,
+        }
+    }
+
+    /// Empties the queue (keeping the storage) for correlations in [threshold, 1].
+    fn reset(&mut self, threshold: f32) {
+        self.buckets.iter_mut().for_each(Vec::clear);
+        self.top = 0;
+        self.len = 0;
+        self.floor = threshold;
+        self.scale = (QUEUE_LEVELS - 1) as f32 / (1.0 - threshold).max(f32::EPSILON);
+    }
+
+    #[inline]
+    fn push(&mut self, cand: Candidate) {
+        let level = (((cand.c - self.floor) * self.scale) as usize).min(QUEUE_LEVELS - 1);
+        self.buckets[level].push(cand);
+        self.top = self.top.max(level);
+        self.len += 1;
+    }
+
+    #[inline]
+    fn pop(&mut self) -> Option<Candidate> {
+        if self.len == 0 {
+            return None;
+        }
+        loop {
+            if let Some(c) = self.buckets[self.top].pop() {
+                self.len -= 1;
+                return Some(c);
+            }
+            self.top -= 1; // len > 0: a lower bucket holds something
+        }
+    }
 }
 
 /// A tiny deterministic generator (SplitMix64) for drawing seed pixels.
@@ -57,33 +105,39 @@ impl SplitMix64 {
 
 /// The best disparity of left pixel (x, y) by exhaustive search over 0..=max_d, with
 /// its correlation, if it is distinct: the best correlation outside d ± 1 must leave at
-/// least `1 / distinctness` times more dissimilarity (1 − c) than the best.
+/// least `1 / distinctness` times more dissimilarity (1 − c) than the best. `scores` is
+/// scratch space (reused between calls).
 pub fn search_line(
     corr: &Correlator,
     x: usize,
     y: usize,
     max_d: usize,
     distinctness: f32,
+    scores: &mut Vec<f32>,
 ) -> Option<(usize, f32)> {
     let top = max_d.min(corr.max_disparity_at(x));
-    let (mut best_d, mut best) = (0usize, f32::NEG_INFINITY);
-    // Scores are kept only to find the runner-up away from the best; the line is short
-    // and seeds are few, so a second pass is cheaper than storing them.
-    for d in 0..=top {
-        let c = corr.score(x, y, d);
-        if c > best {
-            best = c;
-            best_d = d;
-        }
-    }
+    scores.clear();
+    scores.extend((0..=top).map(|d| corr.score(x, y, d)));
+    let (best_d, best) =
+        scores
+            .iter()
+            .copied()
+            .enumerate()
+            .fold(
+                (0, f32::NEG_INFINITY),
+                |a, (d, c)| if c > a.1 { (d, c) } else { a },
+            );
     if !best.is_finite() {
         return None;
     }
-    let runner_up = (0..=top)
-        .filter(|&d| d + 1 < best_d || d > best_d + 1)
-        .map(|d| corr.score(x, y, d))
+    let runner_up = scores
+        .iter()
+        .enumerate()
+        .filter(|&(d, _)| d + 1 < best_d || d > best_d + 1)
+        .map(|(_, &c)| c)
         .fold(f32::NEG_INFINITY, f32::max);
-    let distinct = (1.0 - best) <= distinctness * (1.0 - runner_up);
+    // Strict, so two perfect matches are ambiguous; ρ = 1 turns the test off.
+    let distinct = distinctness >= 1.0 || (1.0 - best) < distinctness * (1.0 - runner_up);
     distinct.then_some((best_d, best))
 }
 
@@ -113,66 +167,102 @@ pub fn random_seeds(
     pixels
         .par_iter()
         .filter(|&&(x, y)| corr.left_textured(x, y))
-        .filter_map(|&(x, y)| {
-            let (d, c) = search_line(corr, x, y, max_d, distinctness)?;
+        .map_init(Vec::new, |scores, &(x, y)| {
+            let (d, c) = search_line(corr, x, y, max_d, distinctness, scores)?;
             (c >= threshold).then_some((x, y, d, c))
         })
+        .flatten()
         .collect()
 }
 
+/// Largest disparity the grower can store (its per-pixel state holds 16-bit values).
+pub const DISPARITY_LIMIT: usize = i16::MAX as usize;
+
+/// Per left pixel: its match (or `NO_MATCH`) and a cache of the correlations at
+/// disparities `cached_d` − 1, `cached_d`, `cached_d` + 1 (`cached_d` = `NOT_CACHED`
+/// when empty). Neighbours usually grow into a pixel with the same d, and the subpixel
+/// step needs the same three values; 16 bytes keep one pixel in one cache line.
+#[derive(Clone, Copy)]
+struct Cell {
+    disp: i16,
+    cached_d: u16,
+    scores: [f32; 3],
+}
+
+const NO_MATCH: i16 = -1;
+const NOT_CACHED: u16 = u16::MAX;
+const EMPTY_CELL: Cell = Cell {
+    disp: NO_MATCH,
+    cached_d: NOT_CACHED,
+    scores: [0.0; 3],
+};
+
 /// Reusable state of the growing stage.
 pub struct Grower {
-    heap: BinaryHeap<Candidate>,
+    queue: BucketQueue,
     right_used: Vec<bool>,
+    cells: Vec<Cell>,
+    /// The rows this grower works on: matches never grow out of them. Rows are
+    /// independent for uniqueness (epipolar lines), so bands can grow in parallel.
+    rows: Range<usize>,
 }
 
 impl Grower {
     pub fn new() -> Self {
         Grower {
-            heap: BinaryHeap::new(),
+            queue: BucketQueue::new(),
             right_used: Vec::new(),
+            cells: Vec::new(),
+            rows: 0..0,
         }
     }
 
-    /// Grows matches from `seeds` (x, y, d); writes the integer disparity (or
-    /// `UNMATCHED`) and the correlation of every left pixel into `disparity` and
-    /// `confidence`. Only candidates with correlation ≥ `threshold` are accepted, and
-    /// no disparity above `max_d`.
+    /// Grows matches from `seeds` (x, y, d) within `rows`. Only candidates with
+    /// correlation ≥ `threshold` are accepted, and no disparity above `max_d`
+    /// (≤ `DISPARITY_LIMIT`). Seeds outside `rows` are ignored. Read the result with
+    /// [`Grower::disparity`].
     pub fn grow(
         &mut self,
         corr: &Correlator,
         seeds: &[(usize, usize, usize)],
         max_d: usize,
         threshold: f32,
-        disparity: &mut [i32],
-        confidence: &mut [f32],
+        rows: Range<usize>,
     ) {
         let w = corr.width();
-        let n = w * corr.height();
-        disparity.fill(UNMATCHED);
-        confidence.fill(f32::NAN);
+        let rows = rows.start.min(corr.height())..rows.end.min(corr.height());
+        let n = w * rows.len();
+        // Indices below are relative to the band's first pixel.
+        let first = rows.start * w;
+        self.rows = rows.clone();
+        let max_d = max_d.min(DISPARITY_LIMIT);
         self.right_used.clear();
         self.right_used.resize(n, false);
-        self.heap.clear();
+        self.cells.clear();
+        self.cells.resize(n, EMPTY_CELL);
+        self.queue.reset(threshold);
 
         for &(x, y, d) in seeds {
-            if corr.inside(x, y) && d <= max_d.min(corr.max_disparity_at(x)) {
+            if rows.contains(&y) && corr.inside(x, y) && d <= max_d.min(corr.max_disparity_at(x)) {
                 let c = corr.score(x, y, d);
                 if c >= threshold {
-                    self.heap.push((key(c), (y * w + x) as u32, d as u32));
+                    self.queue.push(Candidate {
+                        idx: (y * w + x - first) as u32,
+                        d: d as u32,
+                        c,
+                    });
                 }
             }
         }
 
-        while let Some((k, idx, d)) = self.heap.pop() {
-            let (idx, d) = (idx as usize, d as usize);
-            if disparity[idx] != UNMATCHED || self.right_used[idx - d] {
+        while let Some(cand) = self.queue.pop() {
+            let (idx, d) = (cand.idx as usize, cand.d as usize);
+            if self.cells[idx].disp != NO_MATCH || self.right_used[idx - d] {
                 continue; // uniqueness: one of the two pixels is taken already
             }
-            disparity[idx] = d as i32;
-            confidence[idx] = value(k);
+            self.cells[idx].disp = d as i16;
             self.right_used[idx - d] = true;
-            let (x, y) = (idx % w, idx / w);
+            let (x, y) = (idx % w, rows.start + idx / w);
             let neighbours = [
                 (x.wrapping_sub(1), y),
                 (x + 1, y),
@@ -180,29 +270,71 @@ impl Grower {
                 (x, y + 1),
             ];
             for (nx, ny) in neighbours {
-                if !corr.inside(nx, ny) {
+                if !corr.inside(nx, ny) || !rows.contains(&ny) {
                     continue;
                 }
-                let nidx = ny * w + nx;
-                if disparity[nidx] != UNMATCHED {
+                let nidx = ny * w + nx - first;
+                let cell = &mut self.cells[nidx];
+                if cell.disp != NO_MATCH {
                     continue;
                 }
                 let top = max_d.min(corr.max_disparity_at(nx));
+                if d > top + 1 {
+                    continue; // even d − 1 is out of range here
+                }
+                if cell.cached_d != d as u16 {
+                    cell.scores = corr.score3(nx, ny, d, top);
+                    cell.cached_d = d as u16;
+                }
                 let (mut best_d, mut best) = (0usize, f32::NEG_INFINITY);
-                for nd in d.saturating_sub(1)..=(d + 1).min(top) {
-                    if self.right_used[nidx - nd] {
+                for (k, &c) in cell.scores.iter().enumerate() {
+                    let Some(nd) = (d + k).checked_sub(1) else {
                         continue;
-                    }
-                    let c = corr.score(nx, ny, nd);
-                    if c > best {
+                    };
+                    if nd <= top && !self.right_used[nidx - nd] && c > best {
                         best = c;
                         best_d = nd;
                     }
                 }
                 if best >= threshold {
-                    self.heap.push((key(best), nidx as u32, best_d as u32));
+                    self.queue.push(Candidate {
+                        idx: nidx as u32,
+                        d: best_d as u32,
+                        c: best,
+                    });
                 }
             }
+        }
+    }
+
+    /// The integer disparity of every left pixel of its rows after [`Grower::grow`],
+    /// `UNMATCHED` where none, appended to `out`.
+    pub fn disparity(&self, out: &mut Vec<i32>) {
+        out.extend(self.cells.iter().map(|c| {
+            if c.disp == NO_MATCH {
+                UNMATCHED
+            } else {
+                c.disp as i32
+            }
+        }));
+    }
+
+    /// Correlations at d − 1, d, d + 1 of left pixel (x, y) after [`Grower::grow`]
+    /// (from the cache when there), `NO_CORRELATION` outside 0..=top.
+    pub fn scores_around(
+        &self,
+        corr: &Correlator,
+        x: usize,
+        y: usize,
+        d: usize,
+        top: usize,
+    ) -> [f32; 3] {
+        if !self.rows.contains(&y) {
+            return corr.score3(x, y, d, top);
+        }
+        match self.cells.get((y - self.rows.start) * corr.width() + x) {
+            Some(cell) if cell.cached_d as usize == d => cell.scores,
+            _ => corr.score3(x, y, d, top),
         }
     }
 }
@@ -215,17 +347,61 @@ impl Default for Grower {
 
 #[cfg(test)]
 mod tests {
+    use super::super::correlation::Similarity;
     use super::*;
 
     #[test]
-    fn keys_order_like_correlations() {
-        let vals = [-2.0f32, -1.0, -0.3, 0.0, 0.2, 0.7, 0.99, 1.0];
-        for pair in vals.windows(2) {
-            assert!(key(pair[0]) < key(pair[1]));
+    fn queue_pops_by_decreasing_level() {
+        let mut q = BucketQueue::new();
+        q.reset(0.5);
+        for (i, c) in [0.6f32, 0.99, 0.5, 1.0, 0.75, 0.8].into_iter().enumerate() {
+            q.push(Candidate {
+                idx: i as u32,
+                d: 0,
+                c,
+            });
         }
-        for v in vals {
-            assert!((value(key(v)) - v).abs() < 1e-6);
-        }
+        let order: Vec<f32> = std::iter::from_fn(|| q.pop()).map(|c| c.c).collect();
+        assert_eq!(order, vec![1.0, 0.99, 0.8, 0.75, 0.6, 0.5]);
+        assert!(q.pop().is_none());
+        q.push(Candidate {
+            idx: 9,
+            d: 1,
+            c: 0.7,
+        });
+        assert_eq!(q.pop().map(|c| c.idx), Some(9));
+    }
+
+    #[test]
+    fn seed_search_finds_the_shift_and_refuses_repetitive_texture() {
+        let (w, h, shift) = (60, 9, 7);
+        let mut rng = SplitMix64::new(3);
+        let right: Vec<f32> = (0..w * h).map(|_| rng.below(100) as f32).collect();
+        let left: Vec<f32> = (0..w * h)
+            .map(|i| {
+                if i % w >= shift {
+                    right[i - shift]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let corr = Correlator::new(&left, &right, w, h, 2, 0.01, Similarity::Mncc).unwrap();
+        let mut scratch = Vec::new();
+        let (d, c) = search_line(&corr, 40, 4, 30, 0.8, &mut scratch).unwrap();
+        assert_eq!(d, shift);
+        assert!(c > 0.95); // not 1: the two images are normalised by different global gains
+                           // A texture repeating every 6 columns (plus independent noise in each image)
+                           // matches about equally well at d and d ± 6.
+        let mut stripes = || -> Vec<f32> {
+            (0..w * h)
+                .map(|i| ((i % w) % 6) as f32 + rng.below(100) as f32 / 100.0)
+                .collect()
+        };
+        let (a, b) = (stripes(), stripes());
+        let corr = Correlator::new(&a, &b, w, h, 2, 0.01, Similarity::Mncc).unwrap();
+        assert!(search_line(&corr, 40, 4, 30, 0.8, &mut scratch).is_none());
+        assert!(search_line(&corr, 40, 4, 30, 1.0, &mut scratch).is_some());
     }
 
     #[test]

@@ -18,12 +18,18 @@ mod grow;
 pub use correlation::Similarity;
 
 use crate::error::{ensure, Error, Result};
-use correlation::Correlator;
-use grow::{random_seeds, Grower, SplitMix64, UNMATCHED};
+use correlation::{Correlator, NO_CORRELATION};
+use grow::{random_seeds, Grower, SplitMix64, DISPARITY_LIMIT, UNMATCHED};
 use rayon::prelude::*;
 
 /// Largest accepted window side (pixels): beyond it the matcher is needlessly slow.
 pub const MAX_WINDOW: usize = 31;
+
+/// Rows per band: bands grow independently and in parallel (uniqueness couples only
+/// pixels of one row, so a band is a self-contained problem; a surface split by a band
+/// border is grown from the seeds on each side). Fixed, so results do not depend on
+/// the number of threads.
+pub const BAND_ROWS: usize = 96;
 
 /// Largest disparity difference (px) between a left match and the right match it
 /// points to for the left–right check to keep it.
@@ -42,7 +48,8 @@ pub struct StereoConfig {
     pub threshold: f32,
     /// Number of random seed pixels matched by exhaustive search.
     pub num_seeds: usize,
-    /// Largest disparity considered; `None` for the whole epipolar line.
+    /// Largest disparity considered; `None` for the whole epipolar line (at most
+    /// 32767 px either way).
     pub max_disparity: Option<usize>,
     /// Seed distinctness ρ in (0, 1]: a seed is kept only if the best match outside
     /// d ± 1 leaves at least 1/ρ times its dissimilarity (1 − c). 1 disables the test.
@@ -58,6 +65,12 @@ pub struct StereoConfig {
     pub lr_check: bool,
     /// Subpixel refinement by a parabola through the correlations at d − 1, d, d + 1.
     pub subpixel: bool,
+    /// Fill one-pixel gaps between two horizontal neighbours whose disparities differ
+    /// by at most 1, with whichever of their disparities correlates better (if ≥ the
+    /// threshold). On a surface slanted in depth, n left pixels see fewer than n right
+    /// pixels, so integer uniqueness leaves such gaps; the filled pixel shares its right
+    /// pixel with a neighbour.
+    pub fill_gaps: bool,
     /// Matched segments (4-connected, disparity steps ≤ 1) smaller than this many
     /// pixels are removed; 0 keeps everything.
     pub min_segment: usize,
@@ -69,15 +82,16 @@ impl Default for StereoConfig {
     fn default() -> Self {
         StereoConfig {
             window: 5,
-            threshold: 0.6,
+            threshold: 0.45,
             num_seeds: 2000,
             max_disparity: None,
             seed_distinctness: 0.8,
-            min_texture: 0.01,
+            min_texture: 0.005,
             similarity: Similarity::Mncc,
             lr_check: false,
             subpixel: true,
-            min_segment: 0,
+            fill_gaps: true,
+            min_segment: 200,
             rng_seed: 0,
         }
     }
@@ -207,6 +221,7 @@ pub fn match_stereo_seeded(
     ensure(max_d < width, "max_disparity", || {
         format!("must be below the image width {width}, got {max_d}")
     })?;
+    let max_d = max_d.min(DISPARITY_LIMIT);
     for (i, s) in seeds.iter().enumerate() {
         ensure(s.x < width && s.y < height && s.d <= s.x, "seeds", || {
             format!(
@@ -237,7 +252,7 @@ pub fn match_stereo_seeded(
         return Ok(StereoResult::empty(height, width)); // a uniform image: no texture
     };
     let user: Vec<(usize, usize, usize)> = seeds.iter().map(|s| (s.x, s.y, s.d)).collect();
-    let (mut disp_int, confidence, seeds_used) = grow_pass(&corr, config, max_d, &user);
+    let (mut disp_int, seeds_used, growers) = grow_pass(&corr, config, max_d, &user);
 
     if config.lr_check {
         let flip = |img: &[f32]| -> Vec<f32> {
@@ -259,26 +274,32 @@ pub fn match_stereo_seeded(
         let (disp_back, _, _) = grow_pass(&back, config, max_d, &[]);
         left_right_check(&mut disp_int, &disp_back, width);
     }
+    if config.fill_gaps {
+        fill_gaps(&mut disp_int, &corr, max_d, config.threshold);
+    }
     if config.min_segment > 0 {
         remove_small_segments(&mut disp_int, width, height, config.min_segment);
     }
 
+    // Confidence = correlation at d; subpixel offset from d − 1, d, d + 1 (cached).
     let mut disparity = vec![f32::NAN; width * height];
-    let mut conf = confidence;
+    let mut confidence = vec![f32::NAN; width * height];
     disparity
         .par_chunks_mut(width)
-        .zip(conf.par_chunks_mut(width))
+        .zip(confidence.par_chunks_mut(width))
         .zip(disp_int.par_chunks(width))
         .enumerate()
         .for_each(|(y, ((drow, crow), irow))| {
             for (x, ((dv, cv), &d)) in drow.iter_mut().zip(crow).zip(irow).enumerate() {
                 if d == UNMATCHED {
-                    *cv = f32::NAN;
                     continue;
                 }
                 let d = d as usize;
+                let top = max_d.min(corr.max_disparity_at(x));
+                let scores = growers[y / BAND_ROWS].scores_around(&corr, x, y, d, top);
+                *cv = scores[1];
                 let offset = if config.subpixel {
-                    subpixel_offset(&corr, x, y, d, max_d)
+                    subpixel_offset(scores)
                 } else {
                     0.0
                 };
@@ -287,20 +308,22 @@ pub fn match_stereo_seeded(
         });
     Ok(StereoResult {
         disparity,
-        confidence: conf,
+        confidence,
         height,
         width,
         seeds_used,
     })
 }
 
-/// Seeds + growing on one correlator: integer disparities, confidences, seeds used.
+/// Seeds + growing on one correlator, in bands of `BAND_ROWS` rows grown in parallel:
+/// integer disparities, seeds used, and the growers of the bands (their correlation
+/// caches serve the subpixel step).
 fn grow_pass(
     corr: &Correlator,
     config: &StereoConfig,
     max_d: usize,
     user: &[(usize, usize, usize)],
-) -> (Vec<i32>, Vec<f32>, usize) {
+) -> (Vec<i32>, usize, Vec<Grower>) {
     let mut rng = SplitMix64::new(config.rng_seed);
     let found = random_seeds(
         corr,
@@ -312,18 +335,21 @@ fn grow_pass(
     );
     let mut all: Vec<(usize, usize, usize)> = user.to_vec();
     all.extend(found.iter().map(|&(x, y, d, _)| (x, y, d)));
-    let n = corr.width() * corr.height();
-    let mut disparity = vec![UNMATCHED; n];
-    let mut confidence = vec![f32::NAN; n];
-    Grower::new().grow(
-        corr,
-        &all,
-        max_d,
-        config.threshold,
-        &mut disparity,
-        &mut confidence,
-    );
-    (disparity, confidence, all.len())
+    let height = corr.height();
+    let growers: Vec<Grower> = (0..height.div_ceil(BAND_ROWS))
+        .into_par_iter()
+        .map(|band| {
+            let rows = band * BAND_ROWS..((band + 1) * BAND_ROWS).min(height);
+            let mut grower = Grower::new();
+            grower.grow(corr, &all, max_d, config.threshold, rows);
+            grower
+        })
+        .collect();
+    let mut disparity = Vec::with_capacity(corr.width() * height);
+    for g in &growers {
+        g.disparity(&mut disparity);
+    }
+    (disparity, all.len(), growers)
 }
 
 /// Unmatches left pixels whose match is not confirmed by the mirrored (right-to-left)
@@ -342,6 +368,35 @@ fn left_right_check(disp: &mut [i32], back: &[i32], width: usize) {
                 }
             }
         });
+}
+
+/// Fills one-pixel horizontal gaps (see [`StereoConfig::fill_gaps`]).
+fn fill_gaps(disp: &mut [i32], corr: &Correlator, max_d: usize, threshold: f32) {
+    let width = corr.width();
+    disp.par_chunks_mut(width).enumerate().for_each(|(y, row)| {
+        for x in 1..width.saturating_sub(1) {
+            let (dl, dr) = (row[x - 1], row[x + 1]);
+            // No chains: filling x needs x + 1 matched, so a filled pixel never
+            // borders another gap.
+            if row[x] != UNMATCHED || dl == UNMATCHED || dr == UNMATCHED {
+                continue;
+            }
+            if (dl - dr).abs() > 1 || !corr.inside(x, y) {
+                continue;
+            }
+            let top = max_d.min(corr.max_disparity_at(x)) as i32;
+            let mut best = (UNMATCHED, threshold);
+            for d in [dl, dr] {
+                if d <= top {
+                    let c = corr.score(x, y, d as usize);
+                    if c >= best.1 {
+                        best = (d, c);
+                    }
+                }
+            }
+            row[x] = best.0;
+        }
+    });
 }
 
 /// Unmatches 4-connected segments (neighbour disparities within `SEGMENT_STEP`) of
@@ -391,18 +446,13 @@ fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size
     }
 }
 
-/// Vertex offset in (−0.5, 0.5) of the parabola through the correlations at d − 1, d,
-/// d + 1; 0 at the ends of the range or where the three do not peak at d.
-fn subpixel_offset(corr: &Correlator, x: usize, y: usize, d: usize, max_d: usize) -> f32 {
-    let top = max_d.min(corr.max_disparity_at(x));
-    if d == 0 || d + 1 > top {
+/// Vertex offset in [−0.5, 0.5] of the parabola through the correlations at d − 1, d,
+/// d + 1; 0 at the ends of the range (`NO_CORRELATION` there) or where the three do not
+/// peak at d.
+fn subpixel_offset([cm, c0, cp]: [f32; 3]) -> f32 {
+    if cm == NO_CORRELATION || cp == NO_CORRELATION {
         return 0.0;
     }
-    let (cm, c0, cp) = (
-        corr.score(x, y, d - 1),
-        corr.score(x, y, d),
-        corr.score(x, y, d + 1),
-    );
     let curvature = cm - 2.0 * c0 + cp;
     if curvature.is_nan() || curvature >= 0.0 {
         return 0.0;
