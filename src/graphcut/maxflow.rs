@@ -199,16 +199,45 @@ impl<C: Capacity> Graph<C> {
 
     /// Like [`Graph::new`], reserving room for `edge_hint` edges.
     pub fn with_capacity(n_nodes: usize, edge_hint: usize) -> Self {
-        let n = n_nodes.min(MAX_INDEX);
-        Graph {
-            n,
-            pending: Vec::with_capacity(edge_hint),
-            first: vec![0; n + 1],
+        match Self::try_with_capacity(n_nodes.min(MAX_INDEX), edge_hint) {
+            Ok(g) => g,
+            Err(e) => panic!("{e}"),
+        }
+    }
+
+    /// Like [`Graph::with_capacity`], but fails (instead of aborting) when `n_nodes` is
+    /// too large for `u32` indices or the memory cannot be had.
+    pub fn try_with_capacity(n_nodes: usize, edge_hint: usize) -> Result<Self> {
+        if n_nodes > MAX_INDEX {
+            return Err(Error::invalid(
+                "n_nodes",
+                format!("{n_nodes} nodes exceed the u32 index range"),
+            ));
+        }
+        let oom = |what: &str| Error::invalid(what, "not enough memory for the requested size");
+        let mut pending = Vec::new();
+        pending
+            .try_reserve_exact(edge_hint)
+            .map_err(|_| oom("edge_hint"))?;
+        let mut first = Vec::new();
+        first
+            .try_reserve_exact(n_nodes + 1)
+            .map_err(|_| oom("n_nodes"))?;
+        first.resize(n_nodes + 1, 0);
+        let mut nodes = Vec::new();
+        nodes
+            .try_reserve_exact(n_nodes)
+            .map_err(|_| oom("n_nodes"))?;
+        nodes.resize(n_nodes, Node::default());
+        Ok(Graph {
+            n: n_nodes,
+            pending,
+            first,
             arcs: Vec::new(),
             edge_arc: Vec::new(),
             index_edges: false,
             n_edges: 0,
-            nodes: vec![Node::default(); n],
+            nodes,
             changed: Vec::new(),
             terminal_caps: None,
             flow: C::ZERO,
@@ -217,7 +246,7 @@ impl<C: Capacity> Graph<C> {
             queue_last: NONE,
             orphans: VecDeque::new(),
             trees_valid: false,
-        }
+        })
     }
 
     /// Keeps each node's accumulated terminal capacities so that [`Graph::set_tweights`]

@@ -121,16 +121,24 @@ impl PyGraph {
             )
             .into());
         }
-        let hint = edge_hint.clamp(0, i64::from(u32::MAX) / 2) as usize;
+        let max_hint = i64::from(u32::MAX) / 2;
+        if !(0..=max_hint).contains(&edge_hint) {
+            return Err(Error::invalid(
+                "edge_hint",
+                format!("must be in 0..={max_hint}, got {edge_hint}"),
+            )
+            .into());
+        }
+        let hint = edge_hint as usize;
         let integer = match dtype {
             Some(d) => is_integer_dtype(d)?,
             None => false,
         };
         let n = n_nodes as usize;
         let inner = if integer {
-            Inner::I(Graph::with_capacity(n, hint))
+            Inner::I(Graph::try_with_capacity(n, hint)?)
         } else {
-            Inner::F(Graph::with_capacity(n, hint))
+            Inner::F(Graph::try_with_capacity(n, hint)?)
         };
         Ok(PyGraph { inner })
     }
