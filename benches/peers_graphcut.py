@@ -21,7 +21,6 @@ from pathlib import Path
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-
 from depthpose import _core  # noqa: E402
 from depthpose import graphcut as dg  # noqa: E402
 
@@ -123,7 +122,8 @@ def bench_maxflow(rows, reps: int) -> None:
                     f"maxflow {conn}-conn {w}x{h}",
                     t_o,
                     t_p,
-                    f"flow {f_o:.6f} vs {f_p:.6f} (rel {abs(f_o - f_p) / max(abs(f_p), 1e-12):.1e}),"
+                    f"flow {f_o:.6f} vs {f_p:.6f} "
+                    f"(rel {abs(f_o - f_p) / max(abs(f_p), 1e-12):.1e}),"
                     f" labels differ {int((seg_o != seg_p).sum())},"
                     f" build {t_ob * 1e3:.1f} vs {t_pb * 1e3:.1f} ms,"
                     f" B/node {mem_o:.0f} (rss {mem_o_rss:.0f}) vs rss {mem_p_rss:.0f}",

@@ -14,8 +14,8 @@ pub mod error;
 pub mod fit;
 pub mod graphcut;
 pub mod io;
-pub mod stereo;
 pub mod render;
+pub mod stereo;
 pub mod templates;
 
 #[cfg(feature = "python")]

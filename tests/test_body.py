@@ -1,9 +1,8 @@
 """Body model bindings: kinematics, limits, distances, Jacobian, renderer, meshes."""
 
+import depthpose
 import numpy as np
 import pytest
-
-import depthpose
 from depthpose._core import BodyModel, Camera, InvalidInputError
 from depthpose.body import body_trimesh, ellipsoid_trimeshes
 
@@ -41,8 +40,14 @@ def test_neutral_joints_proportions_and_sides():
     hipc = (j[J["RHip"]] + j[J["LHip"]]) / 2
     np.testing.assert_allclose(hipc, [0, 0, 3.0], atol=1e-12)
     # Subject's right side on the image left (camera -x); head up (camera -y).
-    for r, l in [("RShoulder", "LShoulder"), ("RElbow", "LElbow"), ("RHand", "LHand"),
-                 ("RHip", "LHip"), ("RKnee", "LKnee"), ("RFoot", "LFoot")]:
+    for r, l in [
+        ("RShoulder", "LShoulder"),
+        ("RElbow", "LElbow"),
+        ("RHand", "LHand"),
+        ("RHip", "LHip"),
+        ("RKnee", "LKnee"),
+        ("RFoot", "LFoot"),
+    ]:
         assert j[J[r]][0] < 0 < j[J[l]][0]
         np.testing.assert_allclose(j[J[r]] * [-1, 1, 1], j[J[l]], atol=1e-12)  # symmetric
     assert j[J["Head"]][1] < j[J["Neck"]][1] < j[J["Torso"]][1] < 0 < j[J["RKnee"]][1]
@@ -99,7 +104,7 @@ def test_distances_match_dense_surface_sampling():
     m = BodyModel()
     pose = random_pose(rng)
     centres, rots, radii = m.ellipsoids(pose)
-    pts = (m.joints(pose)[rng.integers(0, 15, 200)] + 0.15 * rng.standard_normal((200, 3)))
+    pts = m.joints(pose)[rng.integers(0, 15, 200)] + 0.15 * rng.standard_normal((200, 3))
     d = m.distances(pts.astype(np.float32), pose)
     assert d.shape == (200, 16) and d.dtype == np.float32
     # Dense parametric sampling of two ellipsoids, refined by local minimisation.
@@ -118,8 +123,12 @@ def test_distances_match_dense_surface_sampling():
         for i in range(0, 200, 10):
             dd = np.linalg.norm(s - p32[i], axis=1)
             b = int(np.argmin(dd))
-            res = minimize(lambda x: np.linalg.norm(surf(x[0], x[1]) - p32[i]), [th[b], ph[b]],
-                           method="Nelder-Mead", options={"xatol": 1e-12, "fatol": 1e-14})
+            res = minimize(
+                lambda x: np.linalg.norm(surf(x[0], x[1]) - p32[i]),
+                [th[b], ph[b]],
+                method="Nelder-Mead",
+                options={"xatol": 1e-12, "fatol": 1e-14},
+            )
             assert abs(abs(d[i, k]) - res.fun) < 1e-5
             loc = (p32[i] - centres[k]) @ rots[k]
             assert (d[i, k] < 0) == (np.sum((loc / radii[k]) ** 2) < 1)
@@ -146,8 +155,10 @@ def test_jacobian_matches_finite_differences():
                 pp, pm = pose.copy(), pose.copy()
                 pp[c] += h
                 pm[c] -= h
-            fd = (m.residuals_and_jacobian(pts, labels, pp)[0]
-                  - m.residuals_and_jacobian(pts, labels, pm)[0]) / (2 * h)
+            fd = (
+                m.residuals_and_jacobian(pts, labels, pp)[0]
+                - m.residuals_and_jacobian(pts, labels, pm)[0]
+            ) / (2 * h)
             scale = np.maximum(np.maximum(np.abs(fd), np.abs(jac[:, c])), 1e-3)
             assert np.all(np.abs(fd - jac[:, c]) <= 1e-4 * scale), c
 
@@ -185,7 +196,9 @@ def test_render_matches_trimesh_ray_casting():
     assert np.all((depth > 0) == (labels >= 0))
     mesh = trimesh.util.concatenate(ellipsoid_trimeshes(m, pose, subdivisions=5))
     v, u = np.mgrid[0:60, 0:80]
-    dirs = np.stack([(u - 39.5) / 120.0, (v - 29.5) / 120.0, np.ones_like(u, float)], -1).reshape(-1, 3)
+    dirs = np.stack([(u - 39.5) / 120.0, (v - 29.5) / 120.0, np.ones_like(u, float)], -1).reshape(
+        -1, 3
+    )
     locs, idx, _ = mesh.ray.intersects_location(np.zeros_like(dirs), dirs, multiple_hits=True)
     ref = np.full(len(dirs), np.inf)
     np.minimum.at(ref, idx, locs[:, 2])

@@ -65,7 +65,7 @@ def test_bvh_recomposes_segment_rotations(tmp_path):
         frames = np.asarray(model.segment_transforms(pose))
         world = {}
         col = 0
-        for name, parent, nch in zip(names, parents, channels):
+        for name, parent, nch in zip(names, parents, channels, strict=False):
             vals = motion[f, col : col + nch]
             col += nch
             z, x, y = vals[-3:]

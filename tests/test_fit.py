@@ -5,10 +5,9 @@ from __future__ import annotations
 import glob
 import os
 
+import depthpose as dp
 import numpy as np
 import pytest
-
-import depthpose as dp
 from depthpose._core import BodyModel
 
 SYNTH = os.path.join(os.path.dirname(__file__), "..", "..", "shared", "data", "synth")

@@ -7,11 +7,10 @@ import time
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
-
 from depthpose import graphcut as gc
 from depthpose._core import DepthPoseError, InvalidInputError
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 
 def brute_min_cut(n, edges, caps, revs, src_caps, snk_caps):
@@ -19,7 +18,7 @@ def brute_min_cut(n, edges, caps, revs, src_caps, snk_caps):
     for bits in itertools.product([False, True], repeat=n):
         side = np.array(bits)  # True = sink side
         v = np.where(side, src_caps, snk_caps).sum()
-        for (i, j), c, r in zip(edges, caps, revs):
+        for (i, j), c, r in zip(edges, caps, revs, strict=False):
             if not side[i] and side[j]:
                 v += c
             if side[i] and not side[j]:

@@ -4,7 +4,6 @@ import json
 
 import numpy as np
 import pytest
-
 from depthpose import synth
 from depthpose._core import Camera, InvalidInputError
 

@@ -50,7 +50,7 @@ def test_surface_context_shape_and_determinism():
     b = surface_context(depth, SMALL)
     assert a[0].shape[1] == 3 * 5 * 12 and a[0].dtype == np.float32
     assert 80 <= a[0].shape[0] <= 120
-    for x, y in zip(a, b):
+    for x, y in zip(a, b, strict=False):
         np.testing.assert_array_equal(x, y)
     c = surface_context(depth, SMALL, seed=3)
     assert not np.array_equal(a[1], c[1])

@@ -7,7 +7,7 @@ its public names with a typed API. Every error is a :class:`DepthPoseError` (a
 
 from __future__ import annotations
 
-from . import io, viz
+from . import graphcut, io, stereo, synth, viz
 from ._core import (
     Camera,
     DepthPoseError,
@@ -19,12 +19,23 @@ from ._core import (
     pixel_graph,
     surface_normals,
 )
+from .body import BodyModel
 from .cloud import PointCloud, foreground_mask, point_cloud
 from .fit import FitConfig, FitResult, fit_pose, pose_from_joints
 from .io import read_depth, read_image, write_depth
+from .pipeline import PipelineConfig, PoseEstimator, PoseResult, PoseTracker, estimate_stereo
 from .templates import Candidate, TemplateDatabase, surface_context
 
 __all__ = [
+    "BodyModel",
+    "PipelineConfig",
+    "PoseEstimator",
+    "PoseResult",
+    "PoseTracker",
+    "estimate_stereo",
+    "graphcut",
+    "stereo",
+    "synth",
     "Camera",
     "Candidate",
     "DepthPoseError",

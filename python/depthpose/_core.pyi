@@ -1,6 +1,7 @@
 # Type stubs for the native module depthpose._core (checked by tests/test_stub.py).
+from collections.abc import Callable
 from os import PathLike
-from typing import Any, Callable, List, Tuple
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -212,13 +213,13 @@ class _TemplateDatabase:
 class BodyModel:
     def __init__(self, height: float = 1.75) -> None: ...
     @property
-    def param_names(self) -> List[str]: ...
+    def param_names(self) -> list[str]: ...
     @property
-    def joint_names(self) -> List[str]: ...
+    def joint_names(self) -> list[str]: ...
     @property
-    def part_names(self) -> List[str]: ...
+    def part_names(self) -> list[str]: ...
     @property
-    def shape_names(self) -> List[str]: ...
+    def shape_names(self) -> list[str]: ...
     @property
     def lower_bounds(self) -> npt.NDArray[np.float64]: ...
     @property
@@ -227,7 +228,7 @@ class BodyModel:
     def shape(self) -> npt.NDArray[np.float64]: ...
     @shape.setter
     def shape(self, value: npt.ArrayLike) -> None: ...
-    def shape_dict(self) -> List[Tuple[str, float]]: ...
+    def shape_dict(self) -> list[tuple[str, float]]: ...
     @staticmethod
     def neutral_pose() -> npt.NDArray[np.float64]: ...
     def clamp_pose(self, pose: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]: ...
@@ -249,17 +250,16 @@ class BodyModel:
         points: npt.NDArray[np.floating],
         labels: npt.NDArray[np.integer],
         pose: npt.NDArray[np.float64],
-    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
     def render_depth(
-        self, pose: npt.NDArray[np.float64], camera: "Camera"
-    ) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.int16]]: ...
+        self, pose: npt.NDArray[np.float64], camera: Camera
+    ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int16]]: ...
     def superquadric_meshes(
         self, pose: npt.NDArray[np.float64], rings: int = 20, sectors: int = 24
-    ) -> List[Tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]]: ...
+    ) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]]: ...
     def ellipsoids(
         self, pose: npt.NDArray[np.float64]
-    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
-
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
 
 # ---- fit (src/python/fit.rs) --------------------------------------------------------
 class FitConfig:
@@ -338,3 +338,71 @@ def pose_from_joints(
     model: BodyModel | None = None,
     init: npt.NDArray[np.float64] | None = None,
 ) -> npt.NDArray[np.float64]: ...
+
+# ---- graphcut -----------------------------------------------------------------------
+class MaxflowGraph:
+    def __init__(self, n_nodes: int, dtype: Any = ..., edge_hint: int = ...) -> None: ...
+    n_nodes: int
+    n_edges: int
+    is_integer: bool
+    def memory_bytes(self) -> int: ...
+    def add_edges(
+        self, src: np.ndarray, dst: np.ndarray, cap: np.ndarray, rev_cap: np.ndarray
+    ) -> None: ...
+    def add_terminal_edges(
+        self, nodes: np.ndarray, source_cap: np.ndarray, sink_cap: np.ndarray
+    ) -> None: ...
+    def update_terminal_edges(
+        self, nodes: np.ndarray, delta_source: np.ndarray, delta_sink: np.ndarray
+    ) -> None: ...
+    def maxflow(self) -> int | float: ...
+    def segments(self) -> np.ndarray: ...
+
+def grid_edges(h: int, w: int, connectivity: int = ...) -> np.ndarray: ...
+def alpha_expansion(
+    unary: np.ndarray,
+    edges: np.ndarray,
+    weights: np.ndarray,
+    *,
+    pairwise: np.ndarray | None = ...,
+    init: np.ndarray | None = ...,
+    max_cycles: int = ...,
+) -> tuple[np.ndarray, int | float]: ...
+def alpha_beta_swap(
+    unary: np.ndarray,
+    edges: np.ndarray,
+    weights: np.ndarray,
+    *,
+    pairwise: np.ndarray | None = ...,
+    init: np.ndarray | None = ...,
+    max_cycles: int = ...,
+) -> tuple[np.ndarray, int | float]: ...
+def crf_energy(
+    labels: np.ndarray,
+    unary: np.ndarray,
+    edges: np.ndarray,
+    weights: np.ndarray,
+    pairwise: np.ndarray | None = ...,
+) -> int | float: ...
+
+# ---- stereo -------------------------------------------------------------------------
+def stereo_match(
+    left: np.ndarray,
+    right: np.ndarray,
+    max_disparity: int | None = None,
+    window: int = 5,
+    threshold: float | None = None,
+    num_seeds: int | None = None,
+    seeds: np.ndarray | None = None,
+    seed: int = 0,
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    seed_distinctness: float | None = None,
+    min_texture: float | None = None,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+def depth_from_disparity(
+    disparity: np.ndarray, focal: float, baseline: float, doffs: float = 0.0
+) -> npt.NDArray[np.float32]: ...

@@ -314,7 +314,7 @@ def run(
                 )
                 for k, s in enumerate(specs)
             ]
-            by_key = {f.key: s for f, s in zip(futures, specs)}
+            by_key = {f.key: s for f, s in zip(futures, specs, strict=False)}
             for fut in as_completed(futures):
                 spec = by_key[fut.key]
                 try:

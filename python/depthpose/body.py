@@ -11,7 +11,7 @@ apply a step with `BodyModel.pose_with_root_increment`.
 
 from __future__ import annotations
 
-from typing import Any, List
+from typing import Any
 
 import numpy as np
 
@@ -33,14 +33,14 @@ def body_trimesh(model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: i
     return joined
 
 
-def ellipsoid_trimeshes(model: BodyModel, pose: np.ndarray, subdivisions: int = 4) -> List[Any]:
+def ellipsoid_trimeshes(model: BodyModel, pose: np.ndarray, subdivisions: int = 4) -> list[Any]:
     """The fitting ellipsoids of `pose` as `trimesh` icospheres scaled and placed in the
     camera frame (one per segment, label order)."""
     import trimesh
 
     centres, rotations, radii = model.ellipsoids(pose)
     out = []
-    for c, r, e in zip(centres, rotations, radii):
+    for c, r, e in zip(centres, rotations, radii, strict=False):
         sphere = trimesh.creation.icosphere(subdivisions=subdivisions)
         v = (sphere.vertices * e) @ r.T + c
         out.append(trimesh.Trimesh(v, sphere.faces, process=False))

@@ -8,7 +8,8 @@ proportions).
 
 from __future__ import annotations
 
-from typing import Any, Mapping, Optional, Union
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
@@ -19,7 +20,7 @@ from depthpose._core import pose_from_joints as _pose_from_joints
 __all__ = ["FitConfig", "FitResult", "fit_pose", "pose_from_joints"]
 
 
-def _config(config: Union[None, FitConfig, Mapping[str, Any]]) -> Optional[FitConfig]:
+def _config(config: None | FitConfig | Mapping[str, Any]) -> FitConfig | None:
     if config is None or isinstance(config, FitConfig):
         return config
     if isinstance(config, Mapping):
@@ -32,10 +33,10 @@ def fit_pose(
     camera: Camera,
     init_pose: np.ndarray,
     *,
-    model: Optional[BodyModel] = None,
-    mask: Optional[np.ndarray] = None,
-    config: Union[None, FitConfig, Mapping[str, Any]] = None,
-    prior: Optional[np.ndarray] = None,
+    model: BodyModel | None = None,
+    mask: np.ndarray | None = None,
+    config: None | FitConfig | Mapping[str, Any] = None,
+    prior: np.ndarray | None = None,
     prior_weight: float = 100.0,
 ) -> FitResult:
     """Fit the body to `depth` (H, W; float metres or uint16 mm) from `init_pose` (22,).
@@ -59,7 +60,7 @@ def fit_pose(
 
 
 def pose_from_joints(
-    joints: np.ndarray, model: Optional[BodyModel] = None, init: Optional[np.ndarray] = None
+    joints: np.ndarray, model: BodyModel | None = None, init: np.ndarray | None = None
 ) -> np.ndarray:
     """The pose (22,) whose joints best match `joints` (15, 3) in the camera frame."""
     return _pose_from_joints(np.asarray(joints), model, None if init is None else np.asarray(init))

@@ -9,7 +9,7 @@ Integer inputs (costs, capacities) give exact integer answers. Bad input raises
 
 from __future__ import annotations
 
-from typing import Any, Optional, Tuple, Union
+from typing import Any
 
 import numpy as np
 
@@ -20,7 +20,7 @@ __all__ = ["Graph", "grid_edges", "alpha_expansion", "alpha_beta_swap", "energy"
 #: Default number of cycles over all labels (expansion) or label pairs (swap).
 DEFAULT_MAX_CYCLES = 20
 
-Number = Union[int, float]
+Number = int | float
 
 
 def _c(a: Any) -> Any:
@@ -94,10 +94,10 @@ def alpha_expansion(
     edges: np.ndarray,
     weights: np.ndarray,
     *,
-    pairwise: Optional[np.ndarray] = None,
-    init: Optional[np.ndarray] = None,
+    pairwise: np.ndarray | None = None,
+    init: np.ndarray | None = None,
     max_cycles: int = DEFAULT_MAX_CYCLES,
-) -> Tuple[np.ndarray, Number]:
+) -> tuple[np.ndarray, Number]:
     """Minimises the CRF energy by alpha-expansion; returns ``(labels, energy)``.
 
     ``unary`` (N, L) costs (``+inf`` forbids a label at a node), ``edges`` (E, 2) node
@@ -120,10 +120,10 @@ def alpha_beta_swap(
     edges: np.ndarray,
     weights: np.ndarray,
     *,
-    pairwise: Optional[np.ndarray] = None,
-    init: Optional[np.ndarray] = None,
+    pairwise: np.ndarray | None = None,
+    init: np.ndarray | None = None,
     max_cycles: int = DEFAULT_MAX_CYCLES,
-) -> Tuple[np.ndarray, Number]:
+) -> tuple[np.ndarray, Number]:
     """Like :func:`alpha_expansion` by alpha-beta swap moves (``pairwise`` may be a
     semi-metric: symmetric, zero exactly on the diagonal)."""
     return _core.alpha_beta_swap(  # type: ignore[no-any-return]
@@ -141,7 +141,7 @@ def energy(
     unary: np.ndarray,
     edges: np.ndarray,
     weights: np.ndarray,
-    pairwise: Optional[np.ndarray] = None,
+    pairwise: np.ndarray | None = None,
 ) -> Number:
     """The CRF energy of ``labels`` (``inf`` if a node has a forbidden label)."""
     return _core.crf_energy(  # type: ignore[no-any-return]

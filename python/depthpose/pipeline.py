@@ -230,7 +230,7 @@ class PoseEstimator:
 
 def _stage_times(t: dict[str, float]) -> dict[str, float]:
     keys = list(t)
-    out = {k: 1000 * (t[k] - t[p]) for p, k in zip(keys, keys[1:])}
+    out = {k: 1000 * (t[k] - t[p]) for p, k in zip(keys, keys[1:], strict=False)}
     out["total"] = 1000 * (t[keys[-1]] - t[keys[0]])
     return out  # milliseconds
 

@@ -47,7 +47,7 @@ class Sequence:
             return _to_metres(depth, self.depth_scale, self.path)
         out = [read_depth(f, scale=self.depth_scale) for f in self.files[start:stop]]
         shape = (self.camera.height, self.camera.width)
-        for f, d in zip(self.files[start:stop], out):
+        for f, d in zip(self.files[start:stop], out, strict=False):
             if d.shape != shape:
                 raise FileFormatError(f"{f}: frame is {d.shape}, the sequence is {shape}")
         return np.stack(out) if out else np.zeros((0, *shape), np.float32)

@@ -14,8 +14,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable, Dict, Optional, Union
 
 import numpy as np
 
@@ -95,7 +95,7 @@ def _turn(t: float) -> np.ndarray:
 
 
 # Joint angles of each motion at phase t in [0, 1).
-MOTIONS: Dict[str, Callable[[float], np.ndarray]] = {
+MOTIONS: dict[str, Callable[[float], np.ndarray]] = {
     "walk": _walk,
     "wave": _wave,
     "squat": _squat,
@@ -201,7 +201,7 @@ def _sensor(z: np.ndarray, camera: Camera, noise: float, rng: np.random.Generato
 def make_sequence(
     motion: str = "wave",
     frames: int = 30,
-    camera: Optional[Camera] = None,
+    camera: Camera | None = None,
     distance: float = 3.0,
     view_deg: float = 0.0,
     noise: float = 1.0,
@@ -211,8 +211,8 @@ def make_sequence(
     cycles: float = 1.0,
     camera_height: float = 1.2,
     tilt_deg: float = 5.0,
-    wall_distance: Optional[float] = None,
-) -> Dict[str, np.ndarray]:
+    wall_distance: float | None = None,
+) -> dict[str, np.ndarray]:
     """Renders `frames` frames of `motion` seen from `camera` (default: the ITOP-like
     320x240 camera). The subject's hip centre starts `distance` m ahead, yawed by
     `view_deg` (0 = facing the camera, +90 = left side toward it). Returns a dict with
@@ -228,7 +228,11 @@ def make_sequence(
     cycles = _check("cycles", cycles, 0.0, 100.0)
     camera_height = _check("camera_height", camera_height, 0.2, 3.0)
     tilt = math.radians(_check("tilt_deg", tilt_deg, -45.0, 45.0))
-    wall = distance + 1.5 if wall_distance is None else _check("wall_distance", wall_distance, 1.0, 20.0)
+    wall = (
+        distance + 1.5
+        if wall_distance is None
+        else _check("wall_distance", wall_distance, 1.0, 20.0)
+    )
     if wall <= distance + 0.5:
         raise InvalidInputError("wall_distance: the wall must be at least 0.5 m behind the subject")
     camera = Camera.itop() if camera is None else camera
@@ -240,10 +244,11 @@ def make_sequence(
     # World: x right, y down (floor at y = camera_height), z forward, camera at the
     # origin pitched down by `tilt`; r_wc maps camera directions to world.
     r_wc = np.array(
-        [[1, 0, 0], [0, math.cos(tilt), math.sin(tilt)], [0, -math.sin(tilt), math.cos(tilt)]], float
+        [[1, 0, 0], [0, math.cos(tilt), math.sin(tilt)], [0, -math.sin(tilt), math.cos(tilt)]],
+        float,
     )
     r_cw = r_wc.T
-    shape = dict(zip(model.shape_names, model.shape))
+    shape = dict(zip(model.shape_names, model.shape, strict=False))
     ankle_height = shape["ankle_height"]
 
     h, w = camera.height, camera.width
@@ -312,12 +317,12 @@ def make_sequence(
     }
 
 
-def save(path: Union[str, Path], seq: Dict[str, np.ndarray]) -> None:
+def save(path: str | Path, seq: dict[str, np.ndarray]) -> None:
     """Writes a sequence as a compressed .npz in the shared data's layout."""
     np.savez_compressed(path, **seq)
 
 
-def load(path: Union[str, Path]) -> Dict[str, np.ndarray]:
+def load(path: str | Path) -> dict[str, np.ndarray]:
     """Reads a sequence written by `save` (or a shared synthetic sequence)."""
     with np.load(path, allow_pickle=False) as d:
         return {k: d[k] for k in d.files}

@@ -10,9 +10,10 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -32,8 +33,17 @@ ARM_POSES = ("down", "raised_sideways", "forward", "bent")
 LEG_POSES = ("standing", "step_forward", "step_back", "knee_raised")
 VIEWS = ("front", "left_side", "right_side")
 NUM_TEMPLATES = 768
-_SETTING_NAMES = ("width", "height", "distance", "field_height", "renderer", "samples",
-                  "radial_bins", "angular_bins", "seed")
+_SETTING_NAMES = (
+    "width",
+    "height",
+    "distance",
+    "field_height",
+    "renderer",
+    "samples",
+    "radial_bins",
+    "angular_bins",
+    "seed",
+)
 
 
 @dataclass(frozen=True)
@@ -52,8 +62,13 @@ class Candidate:
     def code(self) -> tuple[str, str, str, str, str]:
         """(right arm, left arm, right leg, left leg, view) names of the template."""
         rest = self.index % 256
-        return (ARM_POSES[rest // 64], ARM_POSES[(rest // 16) % 4], LEG_POSES[(rest // 4) % 4],
-                LEG_POSES[rest % 4], VIEWS[self.index // 256])
+        return (
+            ARM_POSES[rest // 64],
+            ARM_POSES[(rest // 16) % 4],
+            LEG_POSES[(rest // 4) % 4],
+            LEG_POSES[rest % 4],
+            VIEWS[self.index // 256],
+        )
 
 
 def _model_shape(model: Any) -> np.ndarray | None:
@@ -87,16 +102,21 @@ def _progress_bar() -> Callable[[int, int], None]:
     return report
 
 
-def _raycast_depths(shape: np.ndarray | None, camera: Camera, distance: float,
-                    progress: Callable[[int, int], None] | None) -> np.ndarray:
+def _raycast_depths(
+    shape: np.ndarray | None,
+    camera: Camera,
+    distance: float,
+    progress: Callable[[int, int], None] | None,
+) -> np.ndarray:
     """Template depth images by trimesh ray casting of the super-quadric meshes (embree
     when ``embreex`` is installed, trimesh's own triangle intersector otherwise)."""
     import trimesh
 
     h, w = camera.height, camera.width
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    dirs = np.stack([(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy,
-                     np.ones_like(u)], axis=-1).reshape(-1, 3)
+    dirs = np.stack(
+        [(u - camera.cx) / camera.fx, (v - camera.cy) / camera.fy, np.ones_like(u)], axis=-1
+    ).reshape(-1, 3)
     unit = dirs / np.linalg.norm(dirs, axis=1, keepdims=True)
     origins = np.zeros_like(unit)
     out = np.zeros((NUM_TEMPLATES, h, w), dtype=np.float32)
@@ -120,10 +140,22 @@ class TemplateDatabase:
         self._db = native
 
     @classmethod
-    def build(cls, model: Any = None, camera: Camera | None = None, *, width: int = 96,
-              height: int = 96, distance: float = 3.0, field_height: float = 2.4,
-              renderer: str = "superquadric", samples: int = 100, radial_bins: int = 5,
-              angular_bins: int = 12, seed: int = 0, progress: bool = True) -> TemplateDatabase:
+    def build(
+        cls,
+        model: Any = None,
+        camera: Camera | None = None,
+        *,
+        width: int = 96,
+        height: int = 96,
+        distance: float = 3.0,
+        field_height: float = 2.4,
+        renderer: str = "superquadric",
+        samples: int = 100,
+        radial_bins: int = 5,
+        angular_bins: int = 12,
+        seed: int = 0,
+        progress: bool = True,
+    ) -> TemplateDatabase:
         """Renders and describes the 768 templates.
 
         ``renderer``: "superquadric" (Rust rasteriser of the eq. 1 meshes, the default),
@@ -137,43 +169,81 @@ class TemplateDatabase:
         shape = _model_shape(model)
         report = _progress_bar() if progress else None
         if renderer == "trimesh":
-            _, cfg = _core._TemplateDatabase.settings(shape, width=width, height=height,
-                                                      distance=distance,
-                                                      field_height=field_height)
+            _, cfg = _core._TemplateDatabase.settings(
+                shape, width=width, height=height, distance=distance, field_height=field_height
+            )
             f = height * distance / field_height
             cam = Camera(f, f, 0.5 * (width - 1), 0.5 * (height - 1), width, height)
             depths = _raycast_depths(shape, cam, distance, report)
             native = _core._TemplateDatabase.from_depths(
-                depths, shape, width=width, height=height, distance=distance,
-                field_height=field_height, samples=samples, radial_bins=radial_bins,
-                angular_bins=angular_bins, seed=seed)
+                depths,
+                shape,
+                width=width,
+                height=height,
+                distance=distance,
+                field_height=field_height,
+                samples=samples,
+                radial_bins=radial_bins,
+                angular_bins=angular_bins,
+                seed=seed,
+            )
         else:
             native = _core._TemplateDatabase.build(
-                shape, width=width, height=height, distance=distance, field_height=field_height,
-                renderer=renderer, samples=samples, radial_bins=radial_bins,
-                angular_bins=angular_bins, seed=seed, progress=report)
+                shape,
+                width=width,
+                height=height,
+                distance=distance,
+                field_height=field_height,
+                renderer=renderer,
+                samples=samples,
+                radial_bins=radial_bins,
+                angular_bins=angular_bins,
+                seed=seed,
+                progress=report,
+            )
         return cls(native)
 
-    def match(self, depth: np.ndarray, camera: Camera, mask: np.ndarray | None = None,
-              top_k: int = 5, *, shortlist: int = 16, representatives: int = 8,
-              location_weight: float = 0.1, dummy_cost: float = 0.15) -> list[Candidate]:
+    def match(
+        self,
+        depth: np.ndarray,
+        camera: Camera,
+        mask: np.ndarray | None = None,
+        top_k: int = 5,
+        *,
+        shortlist: int = 16,
+        representatives: int = 8,
+        location_weight: float = 0.1,
+        dummy_cost: float = 0.15,
+    ) -> list[Candidate]:
         """Best ``top_k`` templates for the body in ``depth`` (H, W) float32 metres, each
         with its pose placed at the observed body."""
-        found, _ = self._db.match_depth(depth, camera, mask, top_k=top_k, shortlist=shortlist,
-                                        representatives=representatives,
-                                        location_weight=location_weight,
-                                        dummy_cost=dummy_cost)
+        found, _ = self._db.match_depth(
+            depth,
+            camera,
+            mask,
+            top_k=top_k,
+            shortlist=shortlist,
+            representatives=representatives,
+            location_weight=location_weight,
+            dummy_cost=dummy_cost,
+        )
         return [Candidate(**c) for c in found]
 
-    def match_with_shortlist(self, depth: np.ndarray, camera: Camera,
-                             mask: np.ndarray | None = None, top_k: int = 5,
-                             **kwargs: Any) -> tuple[list[Candidate], list[int]]:
+    def match_with_shortlist(
+        self,
+        depth: np.ndarray,
+        camera: Camera,
+        mask: np.ndarray | None = None,
+        top_k: int = 5,
+        **kwargs: Any,
+    ) -> tuple[list[Candidate], list[int]]:
         """Like :meth:`match`, also returning the pruning stage's short list."""
         found, short = self._db.match_depth(depth, camera, mask, top_k=top_k, **kwargs)
         return [Candidate(**c) for c in found], list(short)
 
-    def exact_costs(self, depth: np.ndarray, camera: Camera, indices: list[int],
-                    mask: np.ndarray | None = None) -> np.ndarray:
+    def exact_costs(
+        self, depth: np.ndarray, camera: Camera, indices: list[int], mask: np.ndarray | None = None
+    ) -> np.ndarray:
         """Exact assignment costs against the given templates, without pruning."""
         return np.asarray(self._db.exact_costs(depth, camera, list(indices), mask))
 
@@ -191,8 +261,7 @@ class TemplateDatabase:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, model: Any = None,
-             **settings: Any) -> TemplateDatabase:
+    def load(cls, path: str | os.PathLike, model: Any = None, **settings: Any) -> TemplateDatabase:
         """Reads a database written by :meth:`save`. With ``model`` or settings given,
         refuses a file built for another model or other settings; a file of another
         format version or a corrupt file raises :class:`FileFormatError`."""

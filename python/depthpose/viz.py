@@ -166,13 +166,13 @@ def plot_body_3d(model, pose: np.ndarray, ax=None, *, joints: np.ndarray | None 
                         alpha=0.35, linewidth=0)  # fmt: skip
     j = (model.joints(pose) if joints is None else np.asarray(joints)) * flip
     for a, b in BONES:
-        ax.plot(*zip(j[a][[0, 2, 1]], j[b][[0, 2, 1]]), color="k", linewidth=2)
+        ax.plot(*zip(j[a][[0, 2, 1]], j[b][[0, 2, 1]], strict=False), color="k", linewidth=2)
     ax.scatter(j[:, 0], j[:, 2], j[:, 1], color="k", s=10)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m)")
     ax.set_zlabel("height (m)")
     centre = j.mean(0)
-    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre[[0, 2, 1]]):
+    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), centre[[0, 2, 1]], strict=False):
         setter(c - 1.0, c + 1.0)
     return ax
 
