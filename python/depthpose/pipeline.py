@@ -4,9 +4,8 @@
 From scratch: foreground → surface-context template search → hard EM (CRF labels +
 Levenberg–Marquardt) from the best few candidates, keeping the lowest energy. Tracking:
 each frame starts from the previous pose extrapolated by a damped constant-velocity
-model, with a prior toward it; a lost track (too few points explained, too large a
-residual) is re-initialised from the templates. The tracker calibrates the body shape
-over its first frames unless given a model.
+model, with a prior toward it; a lost track (too few points explained) is re-initialised from the templates. (Subject shape calibration is not built
+yet: the body shape is the model's, scaled from its height.)
 
 Two people in view: the foreground stage keeps the nearest large body (see
 ``foreground_mask``), so the nearest person is estimated.
@@ -50,19 +49,17 @@ class PipelineConfig:
     candidates: int = 3
     #: EM iterations for each candidate before choosing, and for the winner after.
     candidate_iterations: int = 3
-    #: Tracking: weight of the prior toward the predicted pose (0 = none).
-    prior_weight: float = 0.05
+    #: Tracking: weight of the prior toward the predicted pose (see ``fit_pose``).
+    prior_weight: float = 100.0
+    #: Tracking: EM iterations per tracked frame.
+    track_iterations: int = 4
     #: Tracking: share of the previous velocity carried into the prediction.
     velocity_damping: float = 0.5
     #: Tracking: a frame is lost when fewer than this share of the foreground points
     #: are explained by the body (not outliers) ...
     min_inlier_share: float = 0.75
-    #: ... or the root-mean-square point-to-surface distance exceeds this (metres).
-    max_rms_residual: float = 0.05
-    #: Frames used to calibrate the body shape when the tracker has no model.
-    calibration_frames: int = 8
-    #: Fitting configuration passed to ``fit_pose`` (None = its defaults).
-    fit: Any = None
+    #: Fitting settings passed to ``fit_pose`` as ``FitConfig`` keywords (None = defaults).
+    fit: dict[str, Any] | None = None
 
 
 @dataclass
@@ -180,16 +177,18 @@ class PoseEstimator:
         return foreground_mask(depth, self.background)
 
     def _fit(self, depth, mask, init, *, iterations=None, prior=None):
-        from .fit import fit_pose
+        from .fit import FitConfig, fit_pose
 
+        kwargs = dict(self.config.fit or {})
+        if iterations is not None:
+            kwargs["max_iterations"] = iterations
         return fit_pose(
             depth,
             self.camera,
             init,
             model=self.model,
             mask=mask,
-            config=self.config.fit,
-            max_iterations=iterations,
+            config=FitConfig(**kwargs),
             prior=prior,
             prior_weight=self.config.prior_weight,
         )
@@ -246,12 +245,10 @@ class PoseTracker:
         templates=None,
         config: PipelineConfig | None = None,
         background: np.ndarray | None = None,
-        calibrate: bool | None = None,
     ) -> None:
         self.estimator = PoseEstimator(
             camera, model=model, templates=templates, config=config, background=background
         )
-        self.calibrate = (model is None) if calibrate is None else calibrate
         self.reset()
 
     @property
@@ -263,21 +260,15 @@ class PoseTracker:
         return self.estimator.config
 
     def reset(self) -> None:
-        """Forget the track (the calibrated shape is kept)."""
+        """Forget the track."""
         self._prev: np.ndarray | None = None
         self._prev2: np.ndarray | None = None
-        self._calib: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.lost_frames = 0
 
     def _lost(self, fit, mask: np.ndarray) -> bool:
         n = int(mask.sum())
         inliers = int((np.asarray(fit.labels) >= 0).sum())
-        rms = float(getattr(fit, "rms_residual", 0.0))
-        return (
-            n == 0
-            or inliers / n < self.config.min_inlier_share
-            or rms > self.config.max_rms_residual
-        )
+        return n == 0 or inliers / n < self.config.min_inlier_share
 
     def _predict(self) -> np.ndarray:
         assert self._prev is not None
@@ -297,7 +288,7 @@ class PoseTracker:
             m = est._mask(depth, mask)
             t["foreground"] = time.perf_counter()
             pred = self._predict()
-            fit = est._fit(depth, m, pred, prior=pred)
+            fit = est._fit(depth, m, pred, iterations=self.config.track_iterations, prior=pred)
             t["fit"] = time.perf_counter()
             if self._lost(fit, m):
                 self.lost_frames += 1
@@ -307,26 +298,7 @@ class PoseTracker:
                 res = est._result(fit, _stage_times(t), "tracking")
             mask = m
         self._prev2, self._prev = self._prev, res.pose.copy()
-        if self.calibrate and len(self._calib) < self.config.calibration_frames:
-            m = est._mask(depth, mask) if mask is None else mask
-            self._calib.append((np.ascontiguousarray(depth, np.float32), m, res.pose.copy()))
-            if len(self._calib) == self.config.calibration_frames:
-                self._calibrate_shape()
         return res
-
-    def _calibrate_shape(self) -> None:
-        from .fit import fit_shape
-
-        depths = [c[0] for c in self._calib]
-        masks = [c[1] for c in self._calib]
-        poses = [c[2] for c in self._calib]
-        try:
-            self.estimator.model = fit_shape(
-                depths, self.estimator.camera, poses, model=self.model, masks=masks
-            )
-        except DepthPoseError:
-            pass  # keep the current shape; calibration is an improvement, not a need
-        self.calibrate = False
 
 
 @dataclass

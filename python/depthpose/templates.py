@@ -293,12 +293,19 @@ class TemplateDatabase:
         return cls(_core._TemplateDatabase.from_arrays(arrays, str(path), shape, cfg))
 
     @classmethod
-    def default(cls, *, progress: bool = True) -> TemplateDatabase:
-        """The database of the default model and settings, cached under
-        ``$DEPTHPOSE_CACHE`` (or ``~/.cache/depthpose``) and built on first use."""
+    def default_path(cls) -> Path:
+        """Where the default database is cached: ``$DEPTHPOSE_CACHE`` (or
+        ``~/.cache/depthpose``), named by the hash of the default model and settings."""
         root = Path(os.environ.get("DEPTHPOSE_CACHE", Path.home() / ".cache" / "depthpose"))
         digest, _ = _core._TemplateDatabase.settings()
-        path = root / f"templates-{digest}.npz"
+        return root / f"templates-{digest}.npz"
+
+    @classmethod
+    def default(cls, *, progress: bool = True) -> TemplateDatabase:
+        """The database of the default model and settings, cached at
+        :meth:`default_path` and built on first use."""
+        path = cls.default_path()
+        root = path.parent
         if path.exists():
             try:
                 return cls.load(path, model=_default_model_shape())
