@@ -4,8 +4,9 @@
 From scratch: foreground → surface-context template search → hard EM (CRF labels +
 Levenberg–Marquardt) from the best few candidates, keeping the lowest energy. Tracking:
 each frame starts from the previous pose extrapolated by a damped constant-velocity
-model, with a prior toward it; a lost track (too few points explained) is re-initialised from the templates. (Subject shape calibration is not built
-yet: the body shape is the model's, scaled from its height.)
+model, with a prior toward it; a lost track (too few points explained) is
+re-initialised from the templates. Subject shape calibration is not built yet: the body
+shape is the model's, scaled from its height.
 
 Two people in view: the foreground stage keeps the nearest large body (see
 ``foreground_mask``), so the nearest person is estimated.
