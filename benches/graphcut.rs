@@ -117,11 +117,11 @@ fn parts_problem(h: usize, w: usize, l: usize) -> (Vec<f64>, Vec<[u32; 2]>, Vec<
         .collect();
     let scale = (h * h + w * w) as f64 / (l as f64 * 4.0);
     let mut unary = Vec::with_capacity(h * w * l);
-    for k in 0..h * w {
+    for (k, &value) in img.iter().enumerate().take(h * w) {
         let (r, c) = ((k / w) as f64, (k % w) as f64);
         for (p, &(cr, cc)) in centres.iter().enumerate() {
             let d2 = ((r - cr).powi(2) + (c - cc).powi(2)) / scale;
-            let tone = (img[k] - p as f64 / l as f64).abs();
+            let tone = (value - p as f64 / l as f64).abs();
             unary.push(d2 + tone);
         }
     }
