@@ -264,6 +264,8 @@ def run(
     if templates is None:
         from .templates import TemplateDatabase
 
+        # Build (or load) the cached default once here; workers load it from its file.
+        TemplateDatabase.default(progress=progress)
         templates = TemplateDatabase.default_path()
     specs, plans = [], {}
     for seq in seqs:

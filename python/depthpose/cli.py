@@ -56,13 +56,12 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         if viz_dir:
             from . import viz
 
-            pic = viz.overlay_labels(viz.colorize_depth(depth_cache[k]), res.labels)
+            pic = viz.overlay_labels(viz.colorize_depth(frames[k]), res.labels)
             pic = viz.draw_skeleton(pic, res.joints, seq.camera)
             viz.save_png(viz_dir / f"frame_{k:05d}.png", pic)
         sys.stderr.write(f"\rframe {k + 1}/{seq.n_frames}")
 
     frames = seq.frames()
-    depth_cache = frames
     res = estimate_frames(
         frames, seq.camera, background=seq.background, track=args.track, on_frame=on_frame
     )

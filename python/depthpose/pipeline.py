@@ -21,7 +21,6 @@ from typing import Any
 
 import numpy as np
 
-from . import _core
 from ._core import Camera, DepthPoseError, InvalidInputError, NoBodyError
 from .cloud import foreground_mask
 
@@ -384,6 +383,3 @@ def estimate_stereo(
     depth = stereo.depth_from_disparity(disparity, camera.fx, baseline, doffs)
     est = estimator or PoseEstimator(camera)
     return est.estimate(np.ascontiguousarray(depth, np.float32))
-
-
-_ = _core  # the native module backs every call above

@@ -80,9 +80,11 @@ def open_sequence(path: PathLike, *, intrinsics=None, depth_scale: float = 0.001
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in FRAME_SUFFIXES)
         if not files:
             raise FileFormatError(f"{p}: no depth frames ({', '.join(FRAME_SUFFIXES)}) inside")
-        first = read_depth(files[0], scale=depth_scale)
         bg_file = p / "background.png"
         files = [f for f in files if f.name != "background.png"]
+        if not files:
+            raise FileFormatError(f"{p}: no depth frames besides background.png")
+        first = read_depth(files[0], scale=depth_scale)
         bg = read_depth(bg_file, scale=depth_scale) if bg_file.exists() else None
         return Sequence(
             p,
