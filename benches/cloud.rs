@@ -2,7 +2,8 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use depthpose::cloud::{
-    neighbour_graph, normals_from_depth, Cloud, Connectivity, DepthView, NormalConfig,
+    neighbour_graph, neighbour_graph_into, normals_from_depth, normals_into, Cloud, Connectivity,
+    DepthView, NormalConfig, PixelGraph,
 };
 use depthpose::Camera;
 use std::hint::black_box;
@@ -29,6 +30,7 @@ fn bench_cloud(c: &mut Criterion) {
     let cam = Camera::kinect_v1();
     let depth = frame(&cam);
     let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+    // Every pixel with a reading (307k points), fresh buffers each call.
     c.bench_function("cloud_640x480_points_normals_graph8", |b| {
         b.iter(|| {
             let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
@@ -37,6 +39,28 @@ fn bench_cloud(c: &mut Criterion) {
             black_box((cloud.len(), normals.len(), graph.len()))
         })
     });
+    // The same with the buffers kept from frame to frame, as a tracker does.
+    let mut cloud = Cloud::default();
+    let mut normals = Vec::new();
+    let mut graph = PixelGraph::default();
+    let mut steady = |name: &str, mask: Option<&[bool]>| {
+        c.bench_function(name, |b| {
+            b.iter(|| {
+                cloud.fill_from_depth(&view, &cam, mask).unwrap();
+                normals.resize(cloud.len(), [0.0f32; 3]);
+                normals_into(&view, &cam, &cloud, &NormalConfig::default(), &mut normals);
+                neighbour_graph_into(&cloud, Connectivity::Eight, &mut graph);
+                black_box((cloud.len(), normals.len(), graph.len()))
+            })
+        });
+    };
+    steady("cloud_640x480_points_normals_graph8_reused", None);
+    // Only the body (the foreground mask of a real frame): ~57k points.
+    let body: Vec<bool> = depth.iter().map(|&z| z > 0.0 && z < 3.0).collect();
+    steady(
+        "cloud_640x480_body_points_normals_graph8_reused",
+        Some(&body),
+    );
 }
 
 criterion_group!(benches, bench_cloud);

@@ -66,7 +66,7 @@ impl<'a> DepthView<'a> {
     }
 }
 
-/// Valid (foreground) depth pixels as 3-D points.
+/// Valid (foreground) depth pixels as 3-D points, in pixel (row-major) order.
 #[derive(Debug, Clone, Default)]
 pub struct Cloud {
     pub width: usize,
@@ -77,11 +77,27 @@ pub struct Cloud {
     pub pixels: Vec<u32>,
     /// For each pixel, the index of its point or -1.
     pub point_of_pixel: Vec<i32>,
+    /// Index of the first point of each row (`height + 1` entries): the points of row r
+    /// are `row_start[r]..row_start[r + 1]`.
+    pub row_start: Vec<u32>,
 }
 
 impl Cloud {
     /// Back-projects every pixel that has a reading and, if given, is in `mask`.
     pub fn from_depth(depth: &DepthView, camera: &Camera, mask: Option<&[bool]>) -> Result<Self> {
+        let mut cloud = Cloud::default();
+        cloud.fill_from_depth(depth, camera, mask)?;
+        Ok(cloud)
+    }
+
+    /// [`Cloud::from_depth`] into this cloud, reusing its storage: a tracker that keeps
+    /// one `Cloud` allocates nothing per frame once the buffers have grown.
+    pub fn fill_from_depth(
+        &mut self,
+        depth: &DepthView,
+        camera: &Camera,
+        mask: Option<&[bool]>,
+    ) -> Result<()> {
         camera.check_image("depth", depth.height, depth.width)?;
         if let Some(m) = mask {
             ensure(m.len() == depth.data.len(), "mask", || {
@@ -93,36 +109,55 @@ impl Cloud {
             })?;
         }
         let (w, h) = (depth.width, depth.height);
-        let mut point_of_pixel = vec![-1i32; w * h];
-        let mut pixels = Vec::with_capacity(w * h / 4);
-        for (i, &z) in depth.data.iter().enumerate() {
-            if z > 0.0 && mask.is_none_or(|m| m[i]) {
-                point_of_pixel[i] = pixels.len() as i32;
-                pixels.push(i as u32);
-            }
+        let keep = |i: usize| depth.data[i] > 0.0 && mask.is_none_or(|m| m[i]);
+        // Pass 1: points per row, then their offsets.
+        self.row_start.clear();
+        self.row_start.resize(h + 1, 0);
+        self.row_start[1..]
+            .par_iter_mut()
+            .enumerate()
+            .for_each(|(row, n)| *n = (row * w..(row + 1) * w).filter(|&i| keep(i)).count() as u32);
+        for row in 0..h {
+            self.row_start[row + 1] += self.row_start[row];
         }
+        let n = self.row_start[h] as usize;
+        self.width = w;
+        self.height = h;
+        self.points.resize(n, [0.0; 3]);
+        self.pixels.resize(n, 0);
+        self.point_of_pixel.resize(w * h, -1);
+        // Pass 2: every row writes its own slices, in parallel.
         let (fx, fy, cx, cy) = (
             camera.fx as f32,
             camera.fy as f32,
             camera.cx as f32,
             camera.cy as f32,
         );
-        let points = pixels
-            .par_iter()
-            .map(|&i| {
-                let i = i as usize;
-                let (u, v) = ((i % w) as f32, (i / w) as f32);
-                let z = depth.data[i];
-                [(u - cx) * z / fx, (v - cy) * z / fy, z]
-            })
-            .collect();
-        Ok(Cloud {
-            width: w,
-            height: h,
-            points,
-            pixels,
-            point_of_pixel,
-        })
+        let row_start = &self.row_start;
+        let rows = split_rows(&mut self.points, row_start)
+            .into_iter()
+            .zip(split_rows(&mut self.pixels, row_start))
+            .collect::<Vec<_>>();
+        rows.into_par_iter()
+            .zip(self.point_of_pixel.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(row, ((points, pixels), lookup))| {
+                let y = (row as f32 - cy) / fy;
+                let mut k = 0;
+                for (col, slot) in lookup.iter_mut().enumerate() {
+                    let i = row * w + col;
+                    if keep(i) {
+                        let z = depth.data[i];
+                        points[k] = [(col as f32 - cx) * z / fx, y * z, z];
+                        pixels[k] = i as u32;
+                        *slot = row_start[row] as i32 + k as i32;
+                        k += 1;
+                    } else {
+                        *slot = -1;
+                    }
+                }
+            });
+        Ok(())
     }
 
     pub fn len(&self) -> usize {
@@ -139,6 +174,18 @@ impl Cloud {
         let i = self.pixels[k] as usize;
         (i / self.width, i % self.width)
     }
+}
+
+/// Splits a per-point (or per-edge) array into the per-row pieces given by `offsets`
+/// (`rows + 1` increasing entries, the last one the array's length).
+fn split_rows<'a, T>(mut a: &'a mut [T], offsets: &[u32]) -> Vec<&'a mut [T]> {
+    let mut out = Vec::with_capacity(offsets.len().saturating_sub(1));
+    for pair in offsets.windows(2) {
+        let (row, rest) = std::mem::take(&mut a).split_at_mut((pair[1] - pair[0]) as usize);
+        out.push(row);
+        a = rest;
+    }
+    out
 }
 
 /// Largest depth step (metres) still treated as the same surface at depth `z`: a few
@@ -195,9 +242,9 @@ pub fn normals_into(
     assert_eq!(out.len(), cloud.len());
     let r = config.radius.max(1) as isize;
     let (w, h) = (depth.width as isize, depth.height as isize);
-    let (fx, fy, cx, cy) = (
-        camera.fx as f32,
-        camera.fy as f32,
+    let (inv_fx, inv_fy, cx, cy) = (
+        1.0 / camera.fx as f32,
+        1.0 / camera.fy as f32,
         camera.cx as f32,
         camera.cy as f32,
     );
@@ -206,44 +253,57 @@ pub fn normals_into(
             return None;
         }
         let z = depth.data[(row * w + col) as usize];
-        (z > 0.0).then(|| [(col as f32 - cx) * z / fx, (row as f32 - cy) * z / fy, z])
+        (z > 0.0).then(|| {
+            [
+                (col as f32 - cx) * z * inv_fx,
+                (row as f32 - cy) * z * inv_fy,
+                z,
+            ]
+        })
     };
-    out.par_iter_mut().enumerate().for_each(|(k, n)| {
-        let p = cloud.points[k];
-        let (row, col) = cloud.pixel(k);
-        let (row, col) = (row as isize, col as isize);
-        let jump = surface_jump(p[2]) * config.jump_scale * r as f32;
-        let near = |q: Option<[f32; 3]>| q.filter(|q| (q[2] - p[2]).abs() <= jump);
-        let tangent = |a: Option<[f32; 3]>, b: Option<[f32; 3]>| -> Option<[f32; 3]> {
-            match (near(a), near(b)) {
-                (Some(a), Some(b)) => Some(sub(b, a)),
-                (Some(a), None) => Some(sub(p, a)),
-                (None, Some(b)) => Some(sub(b, p)),
-                (None, None) => None,
-            }
-        };
-        let tu = tangent(point_at(row, col - r), point_at(row, col + r));
-        let tv = tangent(point_at(row - r, col), point_at(row + r, col));
-        let view = normalize([-p[0], -p[1], -p[2]]);
-        *n = match (tu, tv) {
-            (Some(tu), Some(tv)) => {
-                let c = cross(tu, tv);
-                let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
-                if len > 0.0 && len.is_finite() {
-                    let c = [c[0] / len, c[1] / len, c[2] / len];
-                    // Face the camera: the normal points back toward the origin.
-                    if c[0] * p[0] + c[1] * p[1] + c[2] * p[2] > 0.0 {
-                        [-c[0], -c[1], -c[2]]
-                    } else {
-                        c
-                    }
-                } else {
-                    view
+    // Rows in parallel; the points of a row are contiguous.
+    split_rows(out, &cloud.row_start)
+        .into_par_iter()
+        .enumerate()
+        .for_each(|(row, normals)| {
+            let first = cloud.row_start[row] as usize;
+            let row = row as isize;
+            for (k, n) in normals.iter_mut().enumerate() {
+                let p = cloud.points[first + k];
+                let col = (cloud.pixels[first + k] as usize % depth.width) as isize;
+                let jump = surface_jump(p[2]) * config.jump_scale * r as f32;
+                let near = |q: Option<[f32; 3]>| q.filter(|q| (q[2] - p[2]).abs() <= jump);
+                let tangent = |a: Option<[f32; 3]>, b: Option<[f32; 3]>| match (near(a), near(b)) {
+                    (Some(a), Some(b)) => Some(sub(b, a)),
+                    (Some(a), None) => Some(sub(p, a)),
+                    (None, Some(b)) => Some(sub(b, p)),
+                    (None, None) => None,
+                };
+                let tu = tangent(point_at(row, col - r), point_at(row, col + r));
+                let tv = tangent(point_at(row - r, col), point_at(row + r, col));
+                *n = match (tu, tv) {
+                    (Some(tu), Some(tv)) => facing_normal(cross(tu, tv), p),
+                    _ => None,
                 }
+                .unwrap_or_else(|| normalize([-p[0], -p[1], -p[2]]));
             }
-            _ => view,
-        };
-    });
+        });
+}
+
+/// The unit normal along `c`, flipped to face the camera at the origin from `p`; None if
+/// `c` is degenerate.
+#[inline]
+fn facing_normal(c: [f32; 3], p: [f32; 3]) -> Option<[f32; 3]> {
+    let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+    if !(len > 0.0 && len.is_finite()) {
+        return None;
+    }
+    let s = if c[0] * p[0] + c[1] * p[1] + c[2] * p[2] > 0.0 {
+        -1.0 / len
+    } else {
+        1.0 / len
+    };
+    Some([c[0] * s, c[1] * s, c[2] * s])
 }
 
 #[inline]
@@ -319,48 +379,76 @@ impl PixelGraph {
     }
 }
 
+/// Calls `f(a, b)` for each forward edge (point indices) starting in `row`, in pixel
+/// order.
+#[inline]
+fn row_edges(cloud: &Cloud, offsets: &[(usize, isize)], row: usize, mut f: impl FnMut(u32, u32)) {
+    let (w, h) = (cloud.width, cloud.height);
+    let lookup = &cloud.point_of_pixel;
+    for col in 0..w {
+        let a = lookup[row * w + col];
+        if a < 0 {
+            continue;
+        }
+        for &(dr, dc) in offsets {
+            let (r2, c2) = (row + dr, col as isize + dc);
+            if r2 >= h || c2 < 0 || c2 >= w as isize {
+                continue;
+            }
+            let b = lookup[r2 * w + c2 as usize];
+            if b >= 0 {
+                f(a as u32, b as u32);
+            }
+        }
+    }
+}
+
 /// Edges between points of `cloud` whose pixels are 4- or 8-neighbours.
 pub fn neighbour_graph(cloud: &Cloud, connectivity: Connectivity) -> PixelGraph {
-    let (w, h) = (cloud.width, cloud.height);
+    let mut graph = PixelGraph::default();
+    neighbour_graph_into(cloud, connectivity, &mut graph);
+    graph
+}
+
+/// [`neighbour_graph`] into `graph`, reusing its storage.
+pub fn neighbour_graph_into(cloud: &Cloud, connectivity: Connectivity, graph: &mut PixelGraph) {
+    let h = cloud.height;
     let offsets = connectivity.offsets();
-    // Rows in parallel, each producing its own edge list, then concatenated in order.
-    let per_row: Vec<Vec<[u32; 2]>> = (0..h)
-        .into_par_iter()
-        .map(|row| {
-            let mut edges = Vec::new();
-            for col in 0..w {
-                let a = cloud.point_of_pixel[row * w + col];
-                if a < 0 {
-                    continue;
-                }
-                for &(dr, dc) in offsets {
-                    let (r2, c2) = (row + dr, col as isize + dc);
-                    if r2 >= h || c2 < 0 || c2 >= w as isize {
-                        continue;
-                    }
-                    let b = cloud.point_of_pixel[r2 * w + c2 as usize];
-                    if b >= 0 {
-                        edges.push([a as u32, b as u32]);
-                    }
-                }
-            }
-            edges
-        })
-        .collect();
-    let edges: Vec<[u32; 2]> = per_row.concat();
-    let (distance, depth_diff): (Vec<f32>, Vec<f32>) = edges
-        .par_iter()
-        .map(|&[a, b]| {
-            let (p, q) = (cloud.points[a as usize], cloud.points[b as usize]);
-            let d = sub(q, p);
-            ((d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(), d[2])
-        })
-        .unzip();
-    PixelGraph {
-        edges,
-        distance,
-        depth_diff,
+    // Pass 1: edges per row and their offsets; pass 2: rows fill their own slices.
+    let mut edge_start = vec![0u32; h + 1];
+    edge_start[1..]
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(row, n)| {
+            let mut count = 0u32;
+            row_edges(cloud, offsets, row, |_, _| count += 1);
+            *n = count;
+        });
+    for row in 0..h {
+        edge_start[row + 1] += edge_start[row];
     }
+    let m = edge_start[h] as usize;
+    graph.edges.resize(m, [0, 0]);
+    graph.distance.resize(m, 0.0);
+    graph.depth_diff.resize(m, 0.0);
+    let rows = split_rows(&mut graph.edges, &edge_start)
+        .into_iter()
+        .zip(split_rows(&mut graph.distance, &edge_start))
+        .zip(split_rows(&mut graph.depth_diff, &edge_start))
+        .collect::<Vec<_>>();
+    rows.into_par_iter()
+        .enumerate()
+        .for_each(|(row, ((edges, distance), depth_diff))| {
+            let mut k = 0;
+            row_edges(cloud, offsets, row, |a, b| {
+                let (p, q) = (cloud.points[a as usize], cloud.points[b as usize]);
+                let d = sub(q, p);
+                edges[k] = [a, b];
+                distance[k] = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                depth_diff[k] = d[2];
+                k += 1;
+            });
+        });
 }
 
 #[cfg(test)]
@@ -476,6 +564,43 @@ mod tests {
             assert!((g8.distance[k] - d).abs() < 1e-6);
         }
         assert!(g4.depth_diff.iter().any(|&d| (d - 0.5).abs() < 1e-6));
+    }
+
+    #[test]
+    fn reused_buffers_give_the_same_cloud_and_graph_as_fresh_ones() {
+        let cam = cam();
+        let sphere = sphere_depth(&cam, [0.05, -0.02, 1.5], 0.2);
+        let plane = plane_depth(&cam, [0.2, -0.3, -1.0], -2.0);
+        let mut cloud = Cloud::default();
+        let mut graph = PixelGraph::default();
+        let mut normals = Vec::new();
+        // The full plane first (large buffers), then the smaller sphere with a mask.
+        for (depth, masked) in [(&plane, false), (&sphere, true), (&plane, false)] {
+            let view = DepthView::new(depth, cam.height, cam.width, "depth").unwrap();
+            let mask: Vec<bool> = (0..depth.len()).map(|i| i % 7 != 0).collect();
+            let mask = masked.then_some(mask.as_slice());
+            let fresh = Cloud::from_depth(&view, &cam, mask).unwrap();
+            cloud.fill_from_depth(&view, &cam, mask).unwrap();
+            assert_eq!(cloud.points, fresh.points);
+            assert_eq!(cloud.pixels, fresh.pixels);
+            assert_eq!(cloud.point_of_pixel, fresh.point_of_pixel);
+            assert_eq!(cloud.row_start, fresh.row_start);
+            for (k, &i) in fresh.pixels.iter().enumerate() {
+                assert_eq!(fresh.point_of_pixel[i as usize], k as i32);
+            }
+            let cfg = NormalConfig::default();
+            normals.resize(cloud.len(), [0.0; 3]);
+            normals_into(&view, &cam, &cloud, &cfg, &mut normals);
+            assert_eq!(normals, normals_from_depth(&view, &cam, &fresh, &cfg));
+            neighbour_graph_into(&cloud, Connectivity::Eight, &mut graph);
+            let g = neighbour_graph(&fresh, Connectivity::Eight);
+            assert_eq!(graph.edges, g.edges);
+            assert_eq!(graph.distance, g.distance);
+            assert!(
+                graph.edges.windows(2).all(|e| e[0] < e[1]),
+                "edges in pixel order"
+            );
+        }
     }
 
     #[test]
