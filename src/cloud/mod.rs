@@ -253,13 +253,11 @@ pub fn normals_into(
             return None;
         }
         let z = depth.data[(row * w + col) as usize];
-        (z > 0.0).then(|| {
-            [
-                (col as f32 - cx) * z * inv_fx,
-                (row as f32 - cy) * z * inv_fy,
-                z,
-            ]
-        })
+        (z > 0.0).then_some([
+            (col as f32 - cx) * z * inv_fx,
+            (row as f32 - cy) * z * inv_fy,
+            z,
+        ])
     };
     // Rows in parallel; the points of a row are contiguous.
     split_rows(out, &cloud.row_start)
