@@ -110,7 +110,7 @@ class PoseResult:
             "confidence": self.confidence.tolist(),
             "timings": dict(self.timings),
             "source": self.source,
-            "discrepancy": float(self.discrepancy),
+            "discrepancy": float(self.discrepancy) if np.isfinite(self.discrepancy) else None,
         }
 
     def to_json(self) -> str:
