@@ -104,3 +104,106 @@ def test_real_kinect_frames_look_like_a_person(templates):
         ok += bool(head_above and shoulders_apart)
     # Upper-body frames only (legs cut by the image border): report, do not overclaim.
     assert ok >= 8, ok
+
+
+# -- left/right ambiguity and track recovery ---------------------------------------------
+
+_JOINT_SWAP = [0, 1, 3, 2, 5, 4, 7, 6, 8, 10, 9, 12, 11, 14, 13]
+
+
+def _random_poses(n, seed=0):
+    from depthpose.pipeline import _rotation_vector
+
+    model = dp.BodyModel()
+    rng = np.random.default_rng(seed)
+    lo, hi = np.asarray(model.lower_bounds), np.asarray(model.upper_bounds)
+    out = []
+    for _ in range(n):
+        p = rng.uniform(np.maximum(lo, -2), np.minimum(hi, 2))
+        p[:3] = rng.uniform([-0.5, -0.3, 2.0], [0.5, 0.3, 4.0])
+        axis = rng.normal(size=3)
+        angle = rng.uniform(0, np.pi * 0.99)
+        from depthpose.pipeline import _rotation_matrix
+
+        p[3:6] = _rotation_vector(_rotation_matrix(axis / np.linalg.norm(axis) * angle))
+        out.append(p)
+    return model, out
+
+
+def test_swap_limbs_is_an_involution_that_mirrors_the_body():
+    from depthpose.pipeline import _rotation_matrix, swap_limbs
+
+    model, poses = _random_poses(20)
+    for p in poses:
+        q = swap_limbs(p)
+        np.testing.assert_array_equal(swap_limbs(q), p)
+        assert not np.allclose(q, p)
+        rot = _rotation_matrix(p[3:6])
+        body = (np.asarray(model.joints(p)) - p[:3]) @ rot  # body frame
+        body_q = (np.asarray(model.joints(q)) - p[:3]) @ rot
+        np.testing.assert_allclose(body_q[_JOINT_SWAP], body * [-1, 1, 1], atol=1e-9)
+    with pytest.raises(dp.DepthPoseError, match="pose"):
+        swap_limbs(np.zeros(21))
+
+
+def test_mirror_view_mirrors_the_joints_in_the_camera():
+    from depthpose.pipeline import mirror_view
+
+    model, poses = _random_poses(20, seed=1)
+    for p in poses:
+        q = mirror_view(p)
+        j, jq = np.asarray(model.joints(p)), np.asarray(model.joints(q))
+        mirrored = p[:3] + (j - p[:3]) * [-1, 1, 1]
+        np.testing.assert_allclose(jq[_JOINT_SWAP], mirrored, atol=1e-9)
+        np.testing.assert_allclose(np.asarray(model.joints(mirror_view(q))), j, atol=1e-9)
+
+
+@pytest.fixture(scope="module")
+def side_walk():
+    seq = synth.make_sequence(motion="walk", frames=14, view_deg=90, seed=5, fps=15)
+    fx, fy, cx, cy = (float(v) for v in seq["intrinsics"])
+    cam = dp.Camera(fx, fy, cx, cy, seq["depth"].shape[2], seq["depth"].shape[1])
+    return seq, cam, seq["background"].astype(np.float32) / 1000
+
+
+def test_depth_discrepancy_tells_the_near_leg_from_the_far_one(side_walk):
+    from depthpose.cloud import foreground_mask
+    from depthpose.pipeline import depth_discrepancy, swap_limbs
+
+    seq, cam, bg = side_walk
+    model = dp.BodyModel()
+    # The frame whose legs are furthest apart.
+    k = int(np.argmax(np.abs(seq["poses"][:, 16] - seq["poses"][:, 19])))
+    depth = seq["depth"][k].astype(np.float32) / 1000
+    mask = foreground_mask(depth, bg)
+    true = depth_discrepancy(model, seq["poses"][k], depth, mask, cam)
+    swapped = depth_discrepancy(model, swap_limbs(seq["poses"][k]), depth, mask, cam)
+    assert true < 0.3 and swapped > 1.3 * true, (true, swapped)
+
+
+def test_tracker_recovers_from_a_swapped_start(side_walk, templates):
+    from depthpose.pipeline import PipelineConfig, swap_limbs
+
+    seq, cam, bg = side_walk
+    k0 = int(np.argmax(np.abs(seq["poses"][:, 16] - seq["poses"][:, 19])))
+    frames = range(k0, min(k0 + 6, len(seq["depth"])))
+
+    def run(cfg):
+        tr = PoseTracker(cam, templates=templates, background=bg, config=cfg)
+        tr.start_from(swap_limbs(seq["poses"][k0]))
+        pck = []
+        for k in frames:
+            res = tr.update(seq["depth"][k].astype(np.float32) / 1000)
+            pck.append((np.linalg.norm(res.joints - seq["joints"][k], axis=1) < 0.10).mean())
+        return tr, np.array(pck)
+
+    # Without the depth checks (the old inlier-share test only) the track stays swapped.
+    blind = PipelineConfig(lost_discrepancy=np.inf, lost_ratio=np.inf, recheck_every=0)
+    tr, pck = run(blind)
+    assert tr.switches == 0 and pck.mean() < 0.8, pck
+    # With them it notices (here at once: the depth is far off) and switches.
+    tr, pck = run(PipelineConfig(recheck_every=4))
+    assert tr.switches >= 1
+    assert pck.min() >= 0.8 and pck.mean() >= 0.9, pck
+    with pytest.raises(dp.DepthPoseError, match="pose"):
+        tr.start_from(np.full(22, np.nan))

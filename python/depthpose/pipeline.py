@@ -33,6 +33,9 @@ __all__ = [
     "estimate_frames",
     "estimate_stereo",
     "FramesResult",
+    "swap_limbs",
+    "mirror_view",
+    "depth_discrepancy",
 ]
 
 JOINT_NAMES = [
@@ -45,8 +48,12 @@ JOINT_NAMES = [
 class PipelineConfig:
     """Settings of the estimator and the tracker."""
 
-    #: Template candidates refined by EM when estimating from scratch.
-    candidates: int = 3
+    #: Template candidates taken from the search when estimating from scratch; each
+    #: also gives its left/right-swapped and mirrored-view hypotheses (see
+    #: :func:`swap_limbs`, :func:`mirror_view`).
+    candidates: int = 5
+    #: Hypotheses (after ranking all by :func:`depth_discrepancy`) refined by EM.
+    hypotheses: int = 4
     #: EM iterations for each candidate before choosing, and for the winner after.
     candidate_iterations: int = 3
     #: Tracking: weight of the prior toward the predicted pose (see ``fit_pose``).
@@ -58,6 +65,18 @@ class PipelineConfig:
     #: Tracking: a frame is lost when fewer than this share of the foreground points
     #: are explained by the body (not outliers) ...
     min_inlier_share: float = 0.75
+    #: Tracking: a frame is also lost when its depth discrepancy (see
+    #: :func:`depth_discrepancy`) exceeds this many times the running median of the
+    #: track's recent discrepancies ...
+    lost_ratio: float = 1.6
+    #: ... or this absolute value.
+    lost_discrepancy: float = 0.5
+    #: Tracking: every this many frames the template search is run again (with the
+    #: swapped and mirrored hypotheses of the tracked pose) and the track switches when
+    #: a hypothesis explains the depth clearly better (0 = never).
+    recheck_every: int = 8
+    #: ... "clearly better": lower discrepancy by at least this share.
+    switch_margin: float = 0.1
     #: Fitting settings passed to ``fit_pose`` as ``FitConfig`` keywords (None = defaults).
     fit: dict[str, Any] | None = None
 
@@ -76,6 +95,8 @@ class PoseResult:
     timings: dict[str, float] = field(default_factory=dict)
     source: str = "templates"  # how the start pose was found: templates | tracking
     joint_names: list[str] = field(default_factory=lambda: list(JOINT_NAMES))
+    #: How badly the fitted body explains the depth (see :func:`depth_discrepancy`).
+    discrepancy: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (labels left out; they are an image)."""
@@ -89,6 +110,7 @@ class PoseResult:
             "confidence": self.confidence.tolist(),
             "timings": dict(self.timings),
             "source": self.source,
+            "discrepancy": float(self.discrepancy) if np.isfinite(self.discrepancy) else None,
         }
 
     def to_json(self) -> str:
@@ -103,6 +125,92 @@ _JOINT_PARTS: list[tuple[str, ...]] = [
     ("pelvis", "l_thigh"), ("r_thigh", "r_shin"), ("l_thigh", "l_shin"),
     ("r_shin", "r_foot"), ("l_shin", "l_foot"),
 ]  # fmt: skip
+
+
+# -- left/right ambiguity ------------------------------------------------------------
+# Pose layout (src/body, ``BodyModel.param_names``): 0..3 root translation, 3..6 root
+# rotation vector, 6 neck flexion, 7 neck lateral bend, 8..12 right shoulder (3) + elbow,
+# 12..16 the same on the left, 16..19 right hip (2) + knee, 19..22 the same on the left.
+# The joint angles are anatomical (the same motion on both sides), so exchanging the
+# right and left blocks and negating the lateral neck bend mirrors the body in its own
+# sagittal plane.
+_SWAP = np.r_[0:8, 12:16, 8:12, 19:22, 16:19]
+_NECK_LATERAL = 7
+_FLIP_X = np.diag([-1.0, 1.0, 1.0])
+
+
+def swap_limbs(pose: np.ndarray) -> np.ndarray:
+    """The left/right-swapped pose: the body mirrored in its own sagittal plane (right
+    and left limb angles exchanged, lateral neck bend negated), root unchanged. In a
+    side view this puts the far leg where the near one was. An involution."""
+    pose = np.asarray(pose, np.float64)
+    if pose.shape != (22,):
+        raise InvalidInputError(f"pose: expected 22 values, got shape {pose.shape}")
+    out = pose[_SWAP].copy()
+    out[_NECK_LATERAL] = -out[_NECK_LATERAL]
+    return out
+
+
+def mirror_view(pose: np.ndarray) -> np.ndarray:
+    """The mirror image of the posed body in the camera's vertical plane through the hip
+    centre (x → −x about the hip centre): the same silhouette flipped left-right, limbs
+    swapped so that the body stays a right-handed one. Joints of the result are the
+    mirrored joints with right and left exchanged. An involution."""
+    out = swap_limbs(pose)
+    rot = _FLIP_X @ _rotation_matrix(out[3:6]) @ _FLIP_X
+    out[3:6] = _rotation_vector(rot)
+    return out
+
+
+def _rotation_matrix(v: np.ndarray) -> np.ndarray:
+    theta = float(np.linalg.norm(v))
+    if theta < 1e-12:
+        return np.eye(3)
+    k = np.asarray(v, np.float64) / theta
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(theta) * kx + (1 - np.cos(theta)) * (kx @ kx)
+
+
+def _rotation_vector(r: np.ndarray) -> np.ndarray:
+    cos = np.clip(0.5 * (np.trace(r) - 1.0), -1.0, 1.0)
+    theta = float(np.arccos(cos))
+    if theta < 1e-12:
+        return np.zeros(3)
+    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+    if np.pi - theta > 1e-4:
+        return theta * w / (2 * np.sin(theta))
+    # Near a half turn: the axis from the symmetric part, its sign from w.
+    b = 0.5 * (r + np.eye(3))
+    i = int(np.argmax(np.diag(b)))
+    axis = b[:, i] / np.sqrt(max(b[i, i], 1e-300))
+    if axis @ w < 0:
+        axis = -axis
+    return theta * axis / np.linalg.norm(axis)
+
+
+def depth_discrepancy(
+    model, pose: np.ndarray, depth: np.ndarray, mask: np.ndarray, camera: Camera,
+    cap: float = 0.1,
+) -> float:  # fmt: skip
+    """How badly ``pose`` explains the observed body, from the depth data alone: the
+    rendered body is compared with the foreground pixel by pixel; where both have depth
+    the cost is the depth difference capped at ``cap`` metres, a foreground pixel with
+    no body rendered or a rendered pixel outside the foreground costs ``cap``. The sum
+    is divided by ``cap`` × the foreground pixel count: 0 = perfect, about 1 or more =
+    unrelated. Unlike the silhouette, the depth tells the near limb from the far one."""
+    rendered, _ = model.render_depth(np.asarray(pose, np.float64), camera)
+    rendered = np.asarray(rendered)
+    obs = mask & np.isfinite(depth) & (depth > 0)
+    n = int(obs.sum())
+    if n == 0:
+        return float("inf")
+    ren = np.isfinite(rendered) & (rendered > 0)
+    both = obs & ren
+    diff = np.minimum(np.abs(rendered[both] - depth[both]), cap).sum()
+    # Rendered where the image shows something else (not a hole inside the mask).
+    outside = (ren & ~mask).sum()
+    missing = (obs & ~ren).sum()
+    return float((diff + cap * (outside + missing)) / (cap * n))
 
 
 def _model(model):
@@ -193,7 +301,7 @@ class PoseEstimator:
             prior_weight=self.config.prior_weight,
         )
 
-    def _result(self, fit, timings, source) -> PoseResult:
+    def _result(self, fit, timings, source, discrepancy=float("nan")) -> PoseResult:
         conf = joint_confidence(self.model, fit.pose, fit.labels, self.camera)
         return PoseResult(
             pose=np.asarray(fit.pose),
@@ -205,26 +313,64 @@ class PoseEstimator:
             confidence=conf,
             timings=timings,
             source=source,
+            discrepancy=float(discrepancy),
         )
 
+    def discrepancy(self, pose: np.ndarray, depth: np.ndarray, mask: np.ndarray) -> float:
+        """:func:`depth_discrepancy` of ``pose`` with this estimator's model and camera."""
+        return depth_discrepancy(self.model, pose, depth, mask, self.camera)
+
+    def hypotheses(self, depth: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
+        """Start poses from the template search: each of the best ``candidates``
+        templates, its left/right-swapped pose and the mirror images of both (the
+        search cannot tell a side view's near limbs from its far ones, nor a view from
+        its mirror image); near-duplicates dropped."""
+        cands = self.templates.match(depth, self.camera, mask=mask, top_k=self.config.candidates)
+        if not cands:
+            raise NoBodyError("depth: no template matched the foreground")
+        out: list[np.ndarray] = []
+        seen: list[np.ndarray] = []
+        for c in cands:
+            p = np.asarray(c.pose, np.float64)
+            for q in (p, swap_limbs(p), mirror_view(p), mirror_view(swap_limbs(p))):
+                j = np.asarray(self.model.joints(q))
+                if any(np.linalg.norm(j - s, axis=1).mean() < 0.03 for s in seen):
+                    continue
+                seen.append(j)
+                out.append(q)
+        return out
+
+    def search(self, depth, mask, *, extra=(), timings=None):
+        """Best fit from the template hypotheses (and ``extra`` start poses, always
+        refined): all ranked by their depth discrepancy, the best ``hypotheses`` refined
+        briefly by EM, the one explaining the depth best refined fully. Returns the fit
+        and its discrepancy."""
+        starts = self.hypotheses(depth, mask)
+        if timings is not None:
+            timings["templates"] = time.perf_counter()
+        ranked = sorted(starts, key=lambda q: self.discrepancy(q, depth, mask))
+        chosen = [*list(extra), *ranked[: max(1, self.config.hypotheses)]]
+        fits = [
+            self._fit(depth, mask, q, iterations=self.config.candidate_iterations) for q in chosen
+        ]
+        scores = [self.discrepancy(f.pose, depth, mask) for f in fits]
+        k = int(np.argmin(scores))
+        best, best_score = fits[k], scores[k]
+        final = self._fit(depth, mask, best.pose)
+        final_score = self.discrepancy(final.pose, depth, mask)
+        if final_score <= best_score:
+            best, best_score = final, final_score
+        return best, best_score
+
     def estimate(self, depth: np.ndarray, mask: np.ndarray | None = None) -> PoseResult:
-        """Foreground → template search → EM from the best candidates."""
+        """Foreground → template search (with swapped and mirrored hypotheses) → EM
+        from the most promising, keeping the pose that explains the depth best."""
         t = {"start": time.perf_counter()}
         mask = self._mask(depth, mask)
         t["foreground"] = time.perf_counter()
-        cands = self.templates.match(depth, self.camera, mask=mask, top_k=self.config.candidates)
-        t["templates"] = time.perf_counter()
-        if not cands:
-            raise NoBodyError("depth: no template matched the foreground")
-        fits = [
-            self._fit(depth, mask, c.pose, iterations=self.config.candidate_iterations)
-            for c in cands
-        ]
-        best = min(fits, key=lambda f: f.energy)
-        final = self._fit(depth, mask, best.pose)
+        best, score = self.search(depth, mask, timings=t)
         t["fit"] = time.perf_counter()
-        timings = _stage_times(t)
-        return self._result(final if final.energy <= best.energy else best, timings, "templates")
+        return self._result(best, _stage_times(t), "templates", score)
 
 
 def _stage_times(t: dict[str, float]) -> dict[str, float]:
@@ -263,12 +409,30 @@ class PoseTracker:
         """Forget the track."""
         self._prev: np.ndarray | None = None
         self._prev2: np.ndarray | None = None
+        self._recent: list[float] = []
+        self._since_check = 0
         self.lost_frames = 0
+        self.switches = 0
 
-    def _lost(self, fit, mask: np.ndarray) -> bool:
+    def start_from(self, pose: np.ndarray) -> None:
+        """Starts the track from a known pose (the next :meth:`update` refines it
+        instead of searching the templates)."""
+        pose = np.asarray(pose, np.float64)
+        if pose.shape != (22,) or not np.isfinite(pose).all():
+            raise InvalidInputError(f"pose: expected 22 finite values, got shape {pose.shape}")
+        self.reset()
+        self._prev = pose.copy()
+
+    def _lost(self, fit, mask: np.ndarray, score: float) -> bool:
         n = int(mask.sum())
         inliers = int((np.asarray(fit.labels) >= 0).sum())
-        return n == 0 or inliers / n < self.config.min_inlier_share
+        if n == 0 or inliers / n < self.config.min_inlier_share:
+            return True
+        if score > self.config.lost_discrepancy:
+            return True
+        if len(self._recent) >= 3:
+            return score > self.config.lost_ratio * float(np.median(self._recent))
+        return False
 
     def _predict(self) -> np.ndarray:
         assert self._prev is not None
@@ -279,25 +443,55 @@ class PoseTracker:
         return np.clip(pred, lo, hi)
 
     def update(self, depth: np.ndarray, mask: np.ndarray | None = None) -> PoseResult:
-        """The pose of the next frame."""
+        """The pose of the next frame. A lost track is re-initialised from the
+        templates; every ``recheck_every`` frames the template hypotheses and the
+        swapped-limbs pose of the track compete with the tracked pose, and the track
+        switches when one explains the depth clearly better."""
         est = self.estimator
+        cfg = self.config
+        switched = False
         if self._prev is None:
             res = est.estimate(depth, mask)
+            switched = True
         else:
             t = {"start": time.perf_counter()}
             m = est._mask(depth, mask)
             t["foreground"] = time.perf_counter()
             pred = self._predict()
-            fit = est._fit(depth, m, pred, iterations=self.config.track_iterations, prior=pred)
+            fit = est._fit(depth, m, pred, iterations=cfg.track_iterations, prior=pred)
+            score = est.discrepancy(fit.pose, depth, m)
             t["fit"] = time.perf_counter()
-            if self._lost(fit, m):
-                self.lost_frames += 1
-                res = est.estimate(depth, m)
-                res.timings["tracking_failed_ms"] = _stage_times(t)["total"]
-            else:
-                res = est._result(fit, _stage_times(t), "tracking")
+            lost = self._lost(fit, m, score)
+            self._since_check += 1
+            recheck = cfg.recheck_every > 0 and self._since_check >= cfg.recheck_every
+            res = est._result(fit, _stage_times(t), "tracking", score)
+            if lost or recheck:
+                self._since_check = 0
+                t2 = {"start": time.perf_counter()}
+                pose = np.asarray(fit.pose)
+                best, best_score = est.search(depth, m, extra=[pose, swap_limbs(pose)])
+                t2["search"] = time.perf_counter()
+                margin = 0.0 if lost else cfg.switch_margin
+                if best_score < score * (1.0 - margin):
+                    timings = res.timings
+                    timings["search"] = _stage_times(t2)["total"]
+                    timings["total"] += timings["search"]
+                    res = est._result(best, timings, "templates", best_score)
+                    switched = True
+                else:
+                    res.timings["search"] = _stage_times(t2)["total"]
+                if lost:
+                    self.lost_frames += 1
             mask = m
-        self._prev2, self._prev = self._prev, res.pose.copy()
+        if switched:
+            self.switches += self._prev is not None
+            self._prev2 = None
+            self._recent = []
+        else:
+            self._prev2 = self._prev
+        self._prev = res.pose.copy()
+        if np.isfinite(res.discrepancy):
+            self._recent = [*self._recent[-14:], res.discrepancy]
         return res
 
 

@@ -1,0 +1,218 @@
+#!/usr/bin/env python3
+"""End-to-end accuracy and speed of ``depthpose.pipeline.estimate_frames`` on the shared
+synthetic sequences (issue #8).
+
+For every sequence (``../shared/data/synth/*.npz`` by default): tracked over every frame,
+and from scratch over every ``--step``-th frame, each with the sequence's background
+frame and the default template database. Scored with ``depthpose.metrics.evaluate``
+(the definitions of ``shared/tools/eval_pose.py``: MPJPE over finite predictions,
+PCK@10cm with NaN counted as wrong). Prints per-sequence, per-joint and overall tables,
+the median per-frame times of ``PoseEstimator.estimate`` and ``PoseTracker.update``
+(tracked frames, tracked frames whose lost-track test or periodic re-check ran the
+template search, and re-initialised / switched frames separately) and the peak resident memory.
+
+    python scripts/eval_pipeline.py                       # everything
+    python scripts/eval_pipeline.py --mode track --seq walk_left --frames 20
+    python scripts/eval_pipeline.py --json-out figures.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_DATA = ROOT.parent / "shared" / "data" / "synth"
+
+
+def _peak_rss_mib() -> float:
+    # ru_maxrss is KiB on Linux, bytes on macOS.
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return rss / (1024 * 1024) if sys.platform == "darwin" else rss / 1024
+
+
+def _load(path: Path, frames: int | None, start: int):
+    from depthpose.sequence import open_sequence
+
+    seq = open_sequence(path)
+    stop = seq.n_frames if frames is None else min(seq.n_frames, start + frames)
+    depth = seq.frames(start, stop)
+    gt = np.asarray(seq.gt_joints[start:stop], np.float64)
+    return seq, depth, gt
+
+
+def _run(depth, seq, templates, config, *, track: bool, step: int):
+    from depthpose.pipeline import estimate_frames
+
+    sources: list[str] = []
+
+    def on_frame(_k, res):
+        # "tracking+search": a tracked frame whose re-check / lost-track search kept it.
+        kept = res.source == "tracking" and "search" in res.timings
+        sources.append("tracking+search" if kept else res.source)
+
+    idx = np.arange(0, depth.shape[0], 1 if track else step)
+    t0 = time.perf_counter()
+    r = estimate_frames(
+        depth[idx],
+        seq.camera,
+        background=seq.background,
+        track=track,
+        templates=templates,
+        config=config,
+        on_frame=on_frame,
+    )
+    wall = time.perf_counter() - t0
+    # Whole-call times (estimate_frames times each step, joint confidences included).
+    times: dict[str, list[float]] = {}
+    for src, sec in zip(sources, r.seconds, strict=True):
+        times.setdefault(src, []).append(1000 * sec)
+    return idx, r, times, wall
+
+
+def _fmt_row(cells, widths):
+    return " | ".join(str(c).ljust(w) for c, w in zip(cells, widths, strict=False))
+
+
+def _table(header, rows):
+    widths = [max(len(str(r[i])) for r in [header, *rows]) for i in range(len(header))]
+    lines = [_fmt_row(header, widths), "-+-".join("-" * w for w in widths)]
+    lines += [_fmt_row(r, widths) for r in rows]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of sequence .npz")
+    ap.add_argument("--seq", nargs="*", default=None, help="substrings of sequence names")
+    ap.add_argument("--mode", choices=["both", "track", "scratch"], default="both")
+    ap.add_argument("--step", type=int, default=4, help="from scratch: every STEP-th frame")
+    ap.add_argument("--frames", type=int, default=None, help="first N frames of each")
+    ap.add_argument("--start", type=int, default=0, help="first frame of each sequence")
+    ap.add_argument("--config", default=None, help="PipelineConfig fields as JSON")
+    ap.add_argument("--per-joint", action="store_true", help="print the per-joint table")
+    ap.add_argument("--per-frame", action="store_true", help="print per-frame MPJPE/source")
+    ap.add_argument("--json-out", type=Path, default=None)
+    args = ap.parse_args(argv)
+    if args.step < 1:
+        ap.error("--step must be >= 1")
+
+    import depthpose as dp
+    from depthpose.metrics import evaluate
+    from depthpose.pipeline import JOINT_NAMES, PipelineConfig
+
+    files = sorted(args.data.glob("*.npz"))
+    if args.seq:
+        files = [f for f in files if any(s in f.stem for s in args.seq)]
+    if not files:
+        print(f"no sequences under {args.data}", file=sys.stderr)
+        return 2
+    config = PipelineConfig(**json.loads(args.config)) if args.config else PipelineConfig()
+    templates = dp.TemplateDatabase.default(progress=False)
+    rss_templates = _peak_rss_mib()
+    modes = ["track", "scratch"] if args.mode == "both" else [args.mode]
+
+    preds: dict[str, list[np.ndarray]] = {m: [] for m in modes}
+    gts: dict[str, list[np.ndarray]] = {m: [] for m in modes}
+    times: dict[str, list[float]] = {"update": [], "kept": [], "reinit": [], "estimate": []}
+    rows = []
+    summary: dict = {"sequences": {}, "config": vars(config)}
+    for f in files:
+        seq, depth, gt = _load(f, args.frames, args.start)
+        row = [f.stem, str(depth.shape[0])]
+        summary["sequences"][f.stem] = {}
+        for m in modes:
+            idx, r, t, wall = _run(depth, seq, templates, config, track=m == "track",
+                                   step=args.step)  # fmt: skip
+            acc = evaluate(r.joints, gt[idx])
+            preds[m].append(r.joints)
+            gts[m].append(gt[idx])
+            if m == "track":
+                times["update"] += t.get("tracking", [])
+                times["kept"] += t.get("tracking+search", [])
+                times["reinit"] += t.get("templates", [])
+            else:
+                times["estimate"] += t.get("templates", [])
+            row += [f"{acc['mpjpe_mm']:.1f}", f"{acc['pck']:.3f}"]
+            summary["sequences"][f.stem][m] = {**acc, "wall_s": wall,
+                                               "reinit": len(t.get("templates", []))}  # fmt: skip
+            if args.per_frame:
+                err = 1000 * np.linalg.norm(r.joints - gt[idx], axis=-1).mean(-1)
+                print(f"{f.stem} {m}: " + " ".join(f"{e:.0f}" for e in err), flush=True)
+        rows.append(row)
+        print(_table(["sequence", "frames"] + [f"{m} {k}" for m in modes for k in
+                                                ("MPJPE", "PCK")], [row]).splitlines()[-1],
+              flush=True)  # fmt: skip
+
+    overall = ["all", str(sum(int(r[1]) for r in rows))]
+    per_joint = {}
+    for m in modes:
+        p, g = np.concatenate(preds[m]), np.concatenate(gts[m])
+        acc = evaluate(p, g)
+        summary[m] = acc
+        overall += [f"**{acc['mpjpe_mm']:.1f}**", f"**{acc['pck']:.3f}**"]
+        valid = np.isfinite(p).all(-1)
+        err = np.linalg.norm(np.where(valid[..., None], p, 0.0) - g, axis=-1)
+        per_joint[m] = [
+            (
+                1000 * err[valid[:, j], j].mean() if valid[:, j].any() else np.nan,
+                float((valid[:, j] & (err[:, j] <= 0.10 + 1e-9)).mean()),
+            )
+            for j in range(len(JOINT_NAMES))
+        ]
+    header = ["sequence", "frames"] + [f"{m} {k}" for m in modes for k in ("MPJPE mm", "PCK")]
+    print()
+    print(_table(header, [*rows, overall]))
+    if args.per_joint:
+        print()
+        jrows = [
+            [name] + [f"{per_joint[m][j][0]:.1f} / {per_joint[m][j][1]:.3f}" for m in modes]
+            for j, name in enumerate(JOINT_NAMES)
+        ]
+        print(_table(["joint"] + [f"{m} MPJPE mm / PCK" for m in modes], jrows))
+    summary["per_joint"] = {
+        m: {n: {"mpjpe_mm": e, "pck": p} for n, (e, p) in zip(JOINT_NAMES, v, strict=False)}
+        for m, v in per_joint.items()
+    }
+
+    print()
+    trows = []
+    for k, label in [
+        ("update", "PoseTracker.update, tracked frame"),
+        ("kept", "PoseTracker.update, tracked frame + search (kept)"),
+        ("reinit", "PoseTracker.update, (re-)initialised frame"),
+        ("estimate", "PoseEstimator.estimate (from scratch)"),
+    ]:
+        v = times[k]
+        if v:
+            trows.append([label, f"{np.median(v):.1f}", str(len(v))])
+            summary[f"median_{k}_ms"] = float(np.median(v))
+    all_update = times["update"] + times["kept"] + times["reinit"]
+    if all_update:
+        trows.append(["PoseTracker.update, all frames (mean)", f"{np.mean(all_update):.1f}",
+                      str(len(all_update))])  # fmt: skip
+        summary["mean_update_all_ms"] = float(np.mean(all_update))
+    print(_table(["timing", "median ms", "frames"], trows))
+    peak = _peak_rss_mib()
+    summary["peak_rss_mib"] = peak
+    summary["rss_after_templates_mib"] = rss_templates
+    load = os.getloadavg()
+    summary["load"] = load
+    print(
+        f"\npeak resident memory {peak:.0f} MiB (after loading the templates: "
+        f"{rss_templates:.0f} MiB); load average {load[0]:.1f} {load[1]:.1f} {load[2]:.1f}"
+    )
+    if args.json_out:
+        args.json_out.write_text(json.dumps(summary, indent=1, default=float))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
