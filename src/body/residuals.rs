@@ -297,7 +297,6 @@ impl BodyModel {
 mod tests {
     use super::super::kinematics::tests::pose_for_tests;
     use super::super::*;
-    use super::*;
     use nalgebra::Vector3;
 
     fn cloud_around(model: &BodyModel, pose: &Pose, n: usize, seed: u64) -> Vec<[f32; 3]> {
