@@ -50,19 +50,20 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
             s += q2;
             ds += q2 * inv;
         }
-        // H = S^{-1/2} − 1 (increasing), H' = −S' / (2 S^{3/2}) with S' = −2·ds.
-        let inv_sqrt = 1.0 / s.sqrt();
-        let h = inv_sqrt - 1.0;
-        if h.abs() <= H_TOLERANCE {
+        // H = S^{-1/2} − 1 is increasing and concave (a negative power mean of the
+        // positive linear functions (u + b_k)/a_k), so Newton from the left end of the
+        // bracket climbs monotonically to the root. The step −H/H' with
+        // H' = S^{-3/2}·ds simplifies to S(√S − 1)/ds: one square root, one division.
+        let root = s.sqrt();
+        if (root - 1.0).abs() <= H_TOLERANCE {
             return u;
         }
-        if h < 0.0 {
+        if root > 1.0 {
             lo = u;
         } else {
             hi = u;
         }
-        let dh = ds * inv_sqrt / s;
-        let mut next = u - h / dh;
+        let mut next = u + s * (root - 1.0) / ds;
         if !(next > lo && next < hi) {
             next = 0.5 * (lo + hi);
         }
@@ -72,6 +73,77 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
         u = next;
     }
     u
+}
+
+/// Queries solved together by [`SortedPlacement::signed_distances_batched`].
+pub const LANES: usize = 4;
+
+/// [`solve_secular`] for [`LANES`] independent 3-term problems sharing `b`, in lockstep:
+/// the same arithmetic and stopping rule lane by lane (so bit-identical results), but
+/// the lanes' divisions and square roots are independent, so the CPU overlaps them
+/// instead of waiting on one dependency chain.
+#[inline]
+fn solve_secular_lanes(
+    a: &[[f64; 3]; LANES],
+    b: &[f64; 3],
+    mut lo: [f64; LANES],
+    mut hi: [f64; LANES],
+) -> [f64; LANES] {
+    let mut u = lo;
+    let mut out = [0.0; LANES];
+    let mut done = [false; LANES];
+    for _ in 0..MAX_ITERATIONS {
+        let mut s = [0.0; LANES];
+        let mut ds = [0.0; LANES];
+        for l in 0..LANES {
+            for k in 0..3 {
+                let inv = 1.0 / (u[l] + b[k]);
+                let q = a[l][k] * inv;
+                let q2 = q * q;
+                s[l] += q2;
+                ds[l] += q2 * inv;
+            }
+        }
+        let mut all_done = true;
+        for l in 0..LANES {
+            if done[l] {
+                continue;
+            }
+            let root = s[l].sqrt();
+            if (root - 1.0).abs() <= H_TOLERANCE {
+                out[l] = u[l];
+                done[l] = true;
+                continue;
+            }
+            if root > 1.0 {
+                lo[l] = u[l];
+            } else {
+                hi[l] = u[l];
+            }
+            let mut next = u[l] + s[l] * (root - 1.0) / ds[l];
+            if !(next > lo[l] && next < hi[l]) {
+                next = 0.5 * (lo[l] + hi[l]);
+            }
+            if (next - u[l]).abs() <= ROOT_TOLERANCE * u[l].abs()
+                || hi[l] - lo[l] <= H_TOLERANCE * hi[l]
+            {
+                out[l] = next;
+                done[l] = true;
+                continue;
+            }
+            u[l] = next;
+            all_done = false;
+        }
+        if all_done {
+            return out;
+        }
+    }
+    for l in 0..LANES {
+        if !done[l] {
+            out[l] = u[l];
+        }
+    }
+    out
 }
 
 /// Closest point for sorted axes e0 ≥ e1 > 0 in 2-D, y ≥ 0.
@@ -112,15 +184,51 @@ struct Sorted {
     inv_e: [f64; 3],
     /// r_k = (e_k / e2)².
     r: [f64; 3],
+    /// b_k = r_k − 1 (the shifts of the normalised secular equation).
+    b: [f64; 3],
 }
 
 impl Sorted {
     fn new(e: [f64; 3]) -> Self {
+        let r = [(e[0] / e[2]).powi(2), (e[1] / e[2]).powi(2), 1.0];
         Sorted {
             e,
             inv_e: [1.0 / e[0], 1.0 / e[1], 1.0 / e[2]],
-            r: [(e[0] / e[2]).powi(2), (e[1] / e[2]).powi(2), 1.0],
+            r,
+            b: [r[0] - 1.0, r[1] - 1.0, 0.0],
         }
+    }
+
+    /// For y ≥ 0 with y2 > 0: the numerators a_k = r_k z_k of the normalised secular
+    /// equation and its bracket [lo, hi].
+    #[inline]
+    fn secular_setup(&self, y: &[f64; 3]) -> ([f64; 3], f64, f64) {
+        let r = self.r;
+        let z = [
+            y[0] * self.inv_e[0],
+            y[1] * self.inv_e[1],
+            y[2] * self.inv_e[2],
+        ];
+        let a = [r[0] * z[0], r[1] * z[1], z[2]];
+        let mut lo = z[2];
+        for k in 0..2 {
+            if z[k] > 0.0 {
+                lo = lo.max(r[k] * (z[k] - 1.0) + 1.0);
+            }
+        }
+        let hi = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+        (a, lo, hi.max(lo))
+    }
+
+    /// The closest point x_k = e_k a_k / (u + b_k) for the root u.
+    #[inline]
+    fn closest_from_root(&self, a: &[f64; 3], u: f64) -> [f64; 3] {
+        let (e, b) = (self.e, self.b);
+        [
+            e[0] * a[0] / (u + b[0]),
+            e[1] * a[1] / (u + b[1]),
+            e[2] * a[2] / u,
+        ]
     }
 }
 
@@ -129,23 +237,9 @@ impl Sorted {
 fn closest_sorted(c: &Sorted, y: [f64; 3]) -> [f64; 3] {
     let e = c.e;
     if y[2] > 0.0 {
-        let r = c.r;
-        let z = [y[0] * c.inv_e[0], y[1] * c.inv_e[1], y[2] * c.inv_e[2]];
-        let a = [r[0] * z[0], r[1] * z[1], z[2]];
-        let b = [r[0] - 1.0, r[1] - 1.0, 0.0];
-        let mut lo = z[2];
-        for k in 0..2 {
-            if z[k] > 0.0 {
-                lo = lo.max(r[k] * (z[k] - 1.0) + 1.0);
-            }
-        }
-        let hi = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-        let u = solve_secular(&a, &b, lo, hi.max(lo));
-        return [
-            e[0] * a[0] / (u + b[0]),
-            e[1] * a[1] / (u + b[1]),
-            e[2] * a[2] / u,
-        ];
+        let (a, lo, hi) = c.secular_setup(&y);
+        let u = solve_secular(&a, &c.b, lo, hi);
+        return c.closest_from_root(&a, u);
     }
     // y2 = 0: does the closest point leave the plane (t = −e2²)?
     let leave = |k: usize| -> Option<f64> {
@@ -270,6 +364,191 @@ impl PlacedEllipsoid {
     }
 }
 
+/// A placed ellipsoid prepared for many camera-frame queries in a hot loop: the axis
+/// sort is folded into the rotation (row k is the camera-frame direction of sorted
+/// axis k), so a query is one 3×3 product, the first-octant closest-point solve and a
+/// norm, with no permutation and no allocation. Gives the same distances as
+/// [`PlacedEllipsoid::query`] (up to the summation order of the last norm).
+#[derive(Debug, Clone, Copy)]
+pub struct SortedPlacement {
+    /// Camera-frame unit direction of each sorted axis (descending half-axes).
+    axes: [[f64; 3]; 3],
+    centre: [f64; 3],
+    sorted: Sorted,
+    /// 1 / e_k² in sorted order.
+    inv_e2: [f64; 3],
+}
+
+impl SortedPlacement {
+    pub fn new(placed: &PlacedEllipsoid) -> Self {
+        let p = &placed.prepared;
+        let col = |axis: usize| {
+            let c = placed.rotation.column(axis);
+            [c[0], c[1], c[2]]
+        };
+        SortedPlacement {
+            axes: [col(p.perm[0]), col(p.perm[1]), col(p.perm[2])],
+            centre: [placed.centre.x, placed.centre.y, placed.centre.z],
+            sorted: p.sorted,
+            inv_e2: p.inv_e2,
+        }
+    }
+
+    /// Largest half-axis.
+    #[inline]
+    pub fn max_radius(&self) -> f64 {
+        self.sorted.e[0]
+    }
+
+    /// Smallest half-axis.
+    #[inline]
+    pub fn min_radius(&self) -> f64 {
+        self.sorted.e[2]
+    }
+
+    /// Coordinates of camera-frame point `p` along the sorted axes (signed).
+    #[inline]
+    pub fn local(&self, p: &[f64; 3]) -> [f64; 3] {
+        let d = [
+            p[0] - self.centre[0],
+            p[1] - self.centre[1],
+            p[2] - self.centre[2],
+        ];
+        let a = &self.axes;
+        [
+            a[0][0] * d[0] + a[0][1] * d[1] + a[0][2] * d[2],
+            a[1][0] * d[0] + a[1][1] * d[1] + a[1][2] * d[2],
+            a[2][0] * d[0] + a[2][1] * d[1] + a[2][2] * d[2],
+        ]
+    }
+
+    /// Σ (y_k / e_k)² of local coordinates `y` (< 1 inside).
+    #[inline]
+    fn level(&self, y: &[f64; 3]) -> f64 {
+        y[0] * y[0] * self.inv_e2[0] + y[1] * y[1] * self.inv_e2[1] + y[2] * y[2] * self.inv_e2[2]
+    }
+
+    /// A lower bound of the unsigned distance from local point `y` to the surface,
+    /// exact to compute (no iteration): for an outside point, both e_min·(s − 1) with
+    /// s² the level (the map y ↦ y/e is (1/e_min)-Lipschitz) and |y| − e_max (the
+    /// bounding sphere) bound it from below; for an inside point the bound is 0.
+    #[inline]
+    pub fn distance_lower_bound(&self, y: &[f64; 3]) -> f64 {
+        let level = self.level(y);
+        if level <= 1.0 {
+            return 0.0;
+        }
+        let scaled = self.sorted.e[2] * (level.sqrt() - 1.0);
+        let sphere = (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt() - self.sorted.e[0];
+        scaled.max(sphere)
+    }
+
+    /// Signed distance (negative inside) of local point `y` (from [`Self::local`]).
+    #[inline]
+    pub fn signed_distance_local(&self, y: &[f64; 3]) -> f64 {
+        let ys = [y[0].abs(), y[1].abs(), y[2].abs()];
+        let x = closest_sorted(&self.sorted, ys);
+        self.signed_from_closest(&ys, &x)
+    }
+
+    /// Signed distance from the local point `y` and its closest point `x` (both
+    /// first-octant, sorted).
+    #[inline]
+    fn signed_from_closest(&self, ys: &[f64; 3], x: &[f64; 3]) -> f64 {
+        let d = ((ys[0] - x[0]) * (ys[0] - x[0])
+            + (ys[1] - x[1]) * (ys[1] - x[1])
+            + (ys[2] - x[2]) * (ys[2] - x[2]))
+            .sqrt();
+        if self.level(ys) < 1.0 {
+            -d
+        } else {
+            d
+        }
+    }
+
+    /// Signed distances of many local points (from [`Self::local`]), [`LANES`] at a time
+    /// through the lockstep root-finder: `emit(i, d)` receives each `(i, y)` of `items`
+    /// with the same value [`Self::signed_distance_local`] gives, in input order.
+    #[inline]
+    pub fn signed_distances_batched(
+        &self,
+        items: impl Iterator<Item = (usize, [f64; 3])>,
+        mut emit: impl FnMut(usize, f64),
+    ) {
+        let mut idx = [0usize; LANES];
+        let mut ys = [[0.0; 3]; LANES];
+        let mut n = 0;
+        for (i, y) in items {
+            let a = [y[0].abs(), y[1].abs(), y[2].abs()];
+            if a[2] > 0.0 {
+                idx[n] = i;
+                ys[n] = a;
+                n += 1;
+                if n == LANES {
+                    self.flush_lanes(&idx, &ys, &mut emit);
+                    n = 0;
+                }
+            } else {
+                // On a coordinate plane: the special cases, one by one.
+                emit(i, self.signed_distance_local(&y));
+            }
+        }
+        for l in 0..n {
+            let x = closest_sorted(&self.sorted, ys[l]);
+            emit(idx[l], self.signed_from_closest(&ys[l], &x));
+        }
+    }
+
+    #[inline]
+    fn flush_lanes(
+        &self,
+        idx: &[usize; LANES],
+        ys: &[[f64; 3]; LANES],
+        emit: &mut impl FnMut(usize, f64),
+    ) {
+        let c = &self.sorted;
+        let mut a = [[0.0; 3]; LANES];
+        let mut lo = [0.0; LANES];
+        let mut hi = [0.0; LANES];
+        for l in 0..LANES {
+            (a[l], lo[l], hi[l]) = c.secular_setup(&ys[l]);
+        }
+        let u = solve_secular_lanes(&a, &c.b, lo, hi);
+        for l in 0..LANES {
+            let x = c.closest_from_root(&a[l], u[l]);
+            emit(idx[l], self.signed_from_closest(&ys[l], &x));
+        }
+    }
+
+    /// Signed distance (negative inside) of camera-frame point `p`.
+    #[inline]
+    pub fn signed_distance(&self, p: &[f64; 3]) -> f64 {
+        self.signed_distance_local(&self.local(p))
+    }
+
+    /// Signed distance and camera-frame outward unit normal at the closest point (the
+    /// gradient of the signed distance with respect to `p`).
+    #[inline]
+    pub fn distance_and_normal(&self, p: &[f64; 3]) -> (f64, [f64; 3]) {
+        let y = self.local(p);
+        let ys = [y[0].abs(), y[1].abs(), y[2].abs()];
+        let x = closest_sorted(&self.sorted, ys);
+        let distance = self.signed_from_closest(&ys, &x);
+        let g = [
+            x[0].copysign(y[0]) * self.inv_e2[0],
+            x[1].copysign(y[1]) * self.inv_e2[1],
+            x[2].copysign(y[2]) * self.inv_e2[2],
+        ];
+        let inv = 1.0 / (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let a = &self.axes;
+        let mut n = [0.0; 3];
+        for (c, v) in n.iter_mut().enumerate() {
+            *v = (g[0] * a[0][c] + g[1] * a[1][c] + g[2] * a[2][c]) * inv;
+        }
+        (distance, n)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -379,6 +658,84 @@ mod tests {
             // Mix points near the surface and far away.
             let y = Vector3::new(px, py, pz).component_mul(&e) * (2.0 * scale);
             check(e, y);
+        }
+    }
+
+    /// Independent reference: plain bisection on F(t) = Σ (e_i y_i / (t + e_i²))² − 1
+    /// over (−e_min², |y|·e_max], run until the bracket cannot shrink any more (every
+    /// f64 between the ends is tried), for points off the coordinate planes.
+    fn bisection_reference(e: &Vector3<f64>, y: &Vector3<f64>) -> f64 {
+        let f = |t: f64| {
+            (0..3)
+                .map(|i| (e[i] * y[i] / (t + e[i] * e[i])).powi(2))
+                .sum::<f64>()
+                - 1.0
+        };
+        let e_min2 = e.min() * e.min();
+        let (mut lo, mut hi) = (-e_min2, y.norm() * e.max());
+        loop {
+            let mid = 0.5 * (lo + hi);
+            if mid <= lo || mid >= hi {
+                break;
+            }
+            if f(mid) > 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let t = 0.5 * (lo + hi);
+        let x = Vector3::from_fn(|i, _| e[i] * e[i] * y[i] / (t + e[i] * e[i]));
+        let d = (y - x).norm();
+        if y.component_div(e).norm_squared() < 1.0 {
+            -d
+        } else {
+            d
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+        /// The hot-loop path (axis sort folded into the rotation, distance-only and
+        /// distance + normal variants, the lower bound) against the bisection reference.
+        #[test]
+        fn sorted_placement_matches_reference(
+            ex in 0.01f64..0.4, ey in 0.01f64..0.4, ez in 0.01f64..0.4,
+            flat in 0usize..4,
+            px in -1.0f64..1.0, py in -1.0f64..1.0, pz in -1.0f64..1.0,
+            scale in prop_oneof![0.001f64..0.5, 0.5f64..1.5, 1.5f64..40.0],
+            angles in (-3.0f64..3.0, -1.5f64..1.5, -3.0f64..3.0),
+        ) {
+            // Include near-spherical, needle and pancake shapes.
+            let e = match flat {
+                0 => Vector3::new(ex, ey, ez),
+                1 => Vector3::new(ex, ex * (1.0 + 1e-9), ex),
+                2 => Vector3::new(ex, ey, 1e-3 * ez),
+                _ => Vector3::new(ex, 1e-2 * ey, 1e-2 * ey),
+            };
+            prop_assume!(px.abs() > 1e-3 && py.abs() > 1e-3 && pz.abs() > 1e-3);
+            let y = Vector3::new(px, py, pz).component_mul(&e) * scale;
+            let reference = bisection_reference(&e, &y);
+            let rot = nalgebra::Rotation3::from_euler_angles(angles.0, angles.1, angles.2);
+            let placed = PlacedEllipsoid {
+                centre: Vector3::new(0.3, -0.2, 2.5),
+                rotation: *rot.matrix(),
+                prepared: Prepared::new(&e),
+            };
+            let p = placed.rotation * y + placed.centre;
+            let fast = SortedPlacement::new(&placed);
+            let pa = [p.x, p.y, p.z];
+            let d = fast.signed_distance(&pa);
+            let tol = 1e-9 * (1.0 + y.norm());
+            prop_assert!((d - reference).abs() < tol, "{d} vs reference {reference}");
+            let (d2, n) = fast.distance_and_normal(&pa);
+            prop_assert_eq!(d, d2);
+            let q = placed.query(&p);
+            prop_assert!((q.distance - d).abs() < 1e-12 * (1.0 + y.norm()));
+            let n = Vector3::new(n[0], n[1], n[2]);
+            prop_assert!((n - q.normal).norm() < 1e-9);
+            let lower = fast.distance_lower_bound(&fast.local(&pa));
+            prop_assert!(lower >= 0.0 && lower <= d.abs() + 1e-12, "{lower} > {d}");
         }
     }
 

@@ -1,15 +1,122 @@
 //! Point-to-ellipsoid distances of a cloud to the posed body, and the residuals and
 //! Jacobian of the model fit.
 
-use super::ellipsoid::{PlacedEllipsoid, Prepared};
+use super::ellipsoid::{PlacedEllipsoid, Prepared, SortedPlacement};
 use super::kinematics::{Kinematics, SEGMENT_DOFS};
-use super::{BodyModel, Pose, NUM_PARAMS, NUM_SEGMENTS};
+use super::{param, BodyModel, Pose, NUM_PARAMS, NUM_SEGMENTS};
 use crate::error::{Error, Result};
-use nalgebra::Vector3;
 use rayon::prelude::*;
 
 /// Points per rayon task: large enough to amortise scheduling.
 const CHUNK_POINTS: usize = 256;
+/// At most this many parameters move one segment (root 6 + shoulder/hip 3 + elbow/knee 1).
+pub const MAX_SEGMENT_DOFS: usize = 10;
+
+/// Everything the per-point hot loops need at one pose, computed once per pose: the
+/// segment ellipsoids with their axis sort folded into the rotation, and for each
+/// segment the parameters that move it with the data of their Jacobian entries.
+///
+/// Moving the surface with velocity v at p changes the signed distance by −n·v. For a
+/// rotation about unit axis a through pivot c, v = a × (p − c), so
+/// −n·v = n·(a × c) − a·(p × n): with m = p × n computed once per point, each entry is
+/// two dot products. For a translation along a, −n·v = −n·a. Both are n·w − a'·m with
+/// (a', w) = (a, a × c) or (0, −a), precomputed per parameter.
+#[derive(Debug, Clone)]
+pub struct PoseGeometry {
+    pub kinematics: Kinematics,
+    pub segments: [SortedPlacement; NUM_SEGMENTS],
+    /// Per segment: its parameters (ascending) and how many there are.
+    dofs: [([usize; MAX_SEGMENT_DOFS], usize); NUM_SEGMENTS],
+    /// Per parameter: a' and w (see above).
+    axis: [[f64; 3]; NUM_PARAMS],
+    moment: [[f64; 3]; NUM_PARAMS],
+}
+
+/// The first `pts.len()` entries of `buf` set to `pts` in f64 (`pts.len()` ≤ buf's).
+#[inline]
+pub fn to_f64<'a>(pts: &[[f32; 3]], buf: &'a mut [[f64; 3]]) -> &'a [[f64; 3]] {
+    for (b, p) in buf.iter_mut().zip(pts) {
+        *b = [p[0] as f64, p[1] as f64, p[2] as f64];
+    }
+    &buf[..pts.len()]
+}
+
+#[inline]
+fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+#[inline]
+fn cross(a: &[f64; 3], b: &[f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+impl PoseGeometry {
+    pub fn new(model: &BodyModel, pose: &Pose) -> Self {
+        let kinematics = Kinematics::new(model, pose);
+        let placed = model.placed_ellipsoids(&kinematics);
+        let segments = std::array::from_fn(|k| SortedPlacement::new(&placed[k]));
+        let dofs = std::array::from_fn(|k| {
+            let mut idx = [0usize; MAX_SEGMENT_DOFS];
+            let mut n = 0;
+            for dof in (0..NUM_PARAMS).filter(|d| SEGMENT_DOFS[k] & (1 << d) != 0) {
+                idx[n] = dof;
+                n += 1;
+            }
+            (idx, n)
+        });
+        let mut axis = [[0.0; 3]; NUM_PARAMS];
+        let mut moment = [[0.0; 3]; NUM_PARAMS];
+        for dof in 0..NUM_PARAMS {
+            let a = kinematics.dof_axis[dof];
+            let a = [a.x, a.y, a.z];
+            if dof < param::ROOT_R {
+                moment[dof] = [-a[0], -a[1], -a[2]];
+            } else {
+                let c = kinematics.dof_pivot[dof];
+                moment[dof] = cross(&a, &[c.x, c.y, c.z]);
+                axis[dof] = a;
+            }
+        }
+        PoseGeometry {
+            kinematics,
+            segments,
+            dofs,
+            axis,
+            moment,
+        }
+    }
+
+    /// The parameters that move segment `k` (ascending).
+    #[inline]
+    pub fn segment_dofs(&self, k: usize) -> &[usize] {
+        let (idx, n) = &self.dofs[k];
+        &idx[..*n]
+    }
+
+    /// d(signed distance)/d(parameter) of a point `p` on segment `k` whose closest-point
+    /// normal is `n`, for the parameters of [`Self::segment_dofs`] in that order
+    /// (written to the first entries of `out`; returns how many).
+    #[inline]
+    pub fn jacobian_row(
+        &self,
+        k: usize,
+        p: &[f64; 3],
+        n: &[f64; 3],
+        out: &mut [f64; MAX_SEGMENT_DOFS],
+    ) -> usize {
+        let m = cross(p, n);
+        let (idx, count) = &self.dofs[k];
+        for (o, &dof) in out.iter_mut().zip(&idx[..*count]) {
+            *o = dot(n, &self.moment[dof]) - dot(&self.axis[dof], &m);
+        }
+        *count
+    }
+}
 
 impl BodyModel {
     /// The segment ellipsoids placed in the camera frame for the frames of `kin`.
@@ -23,12 +130,6 @@ impl BodyModel {
                 prepared: Prepared::new(&ell[k].radii),
             }
         })
-    }
-
-    fn placed(&self, pose: &Pose) -> (Kinematics, [PlacedEllipsoid; NUM_SEGMENTS]) {
-        let kin = Kinematics::new(self, pose);
-        let placed = self.placed_ellipsoids(&kin);
-        (kin, placed)
     }
 
     /// Signed distances (negative inside) of every point to every segment ellipsoid:
@@ -45,23 +146,26 @@ impl BodyModel {
                 ),
             ));
         }
-        let (_, placed) = self.placed(pose);
+        let geo = PoseGeometry::new(self, pose);
         out.par_chunks_mut(CHUNK_POINTS * NUM_SEGMENTS)
             .zip(points.par_chunks(CHUNK_POINTS))
             .for_each(|(o, pts)| {
-                for (row, p) in o.chunks_exact_mut(NUM_SEGMENTS).zip(pts) {
-                    let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                    for (d, e) in row.iter_mut().zip(&placed) {
-                        *d = e.signed_distance(&p) as f32;
-                    }
+                let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
+                let buf = to_f64(pts, &mut buf);
+                for (k, e) in geo.segments.iter().enumerate() {
+                    e.signed_distances_batched(
+                        buf.iter().enumerate().map(|(i, p)| (i, e.local(p))),
+                        |i, d| o[i * NUM_SEGMENTS + k] = d as f32,
+                    );
                 }
             });
         Ok(())
     }
 
     /// Like [`BodyModel::distances`], but exact only where it matters for truncated
-    /// costs: when a cheap lower bound (distance to the ellipsoid's bounding sphere)
-    /// already reaches `cap`, that bound is written instead of the exact distance. So
+    /// costs: when a cheap lower bound (the larger of the bounding-sphere bound and the
+    /// scaled-radii bound, see [`SortedPlacement::distance_lower_bound`]) already
+    /// reaches `cap`, that bound is written instead of the exact distance. So
     /// every value below `cap` is exact and every value ≥ `cap` means "at least `cap`".
     /// Much faster when most points are far from most segments.
     pub fn distances_capped(
@@ -88,21 +192,28 @@ impl BodyModel {
                 ),
             ));
         }
-        let (_, placed) = self.placed(pose);
-        let bound: [f64; NUM_SEGMENTS] = std::array::from_fn(|k| placed[k].prepared.radii().max());
+        let geo = PoseGeometry::new(self, pose);
         out.par_chunks_mut(CHUNK_POINTS * NUM_SEGMENTS)
             .zip(points.par_chunks(CHUNK_POINTS))
             .for_each(|(o, pts)| {
-                for (row, p) in o.chunks_exact_mut(NUM_SEGMENTS).zip(pts) {
-                    let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                    for ((d, e), r) in row.iter_mut().zip(&placed).zip(&bound) {
-                        let lower = (p - e.centre).norm() - r;
-                        *d = if lower >= cap {
-                            lower as f32
+                let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
+                let buf = to_f64(pts, &mut buf);
+                let mut near = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
+                for (k, e) in geo.segments.iter().enumerate() {
+                    let mut m = 0;
+                    for (i, p) in buf.iter().enumerate() {
+                        let y = e.local(p);
+                        let lower = e.distance_lower_bound(&y);
+                        if lower >= cap {
+                            o[i * NUM_SEGMENTS + k] = lower as f32;
                         } else {
-                            e.signed_distance(&p) as f32
-                        };
+                            near[m] = (i, y);
+                            m += 1;
+                        }
                     }
+                    e.signed_distances_batched(near[..m].iter().copied(), |i, d| {
+                        o[i * NUM_SEGMENTS + k] = d as f32
+                    });
                 }
             });
         Ok(())
@@ -150,7 +261,7 @@ impl BodyModel {
                 ),
             ));
         }
-        let (kin, placed) = self.placed(pose);
+        let geo = PoseGeometry::new(self, pose);
         residuals_out
             .par_chunks_mut(CHUNK_POINTS)
             .zip(jacobian_out.par_chunks_mut(CHUNK_POINTS * NUM_PARAMS))
@@ -168,15 +279,13 @@ impl BodyModel {
                         continue;
                     }
                     let k = label as usize;
-                    let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                    let q = placed[k].query(&p);
-                    res[i] = q.distance;
-                    // Moving the segment with velocity v at p changes the distance by −n·v.
-                    let mask = SEGMENT_DOFS[k];
-                    for (dof, out) in row.iter_mut().enumerate() {
-                        if mask & (1 << dof) != 0 {
-                            *out = -q.normal.dot(&kin.point_velocity(dof, &p));
-                        }
+                    let p = [p[0] as f64, p[1] as f64, p[2] as f64];
+                    let (d, normal) = geo.segments[k].distance_and_normal(&p);
+                    res[i] = d;
+                    let mut j = [0.0; MAX_SEGMENT_DOFS];
+                    let count = geo.jacobian_row(k, &p, &normal, &mut j);
+                    for (&dof, v) in geo.segment_dofs(k).iter().zip(&j[..count]) {
+                        row[dof] = *v;
                     }
                 }
             });
@@ -188,7 +297,7 @@ impl BodyModel {
 mod tests {
     use super::super::kinematics::tests::pose_for_tests;
     use super::super::*;
-    use super::*;
+    use nalgebra::Vector3;
 
     fn cloud_around(model: &BodyModel, pose: &Pose, n: usize, seed: u64) -> Vec<[f32; 3]> {
         // Points scattered around the joints (inside and outside the ellipsoids).

@@ -25,11 +25,11 @@
 
 use super::lm::{LevenbergMarquardt, LmConfig, PosePrior, WithPrior};
 use super::objective::{Loss, PointCost, PointObjective, CHUNK_POINTS};
-use crate::body::{BodyModel, Kinematics, Pose, NUM_SEGMENTS};
+use crate::body::residuals::{to_f64, PoseGeometry};
+use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::cloud::PixelGraph;
 use crate::error::{ensure, Error, Result};
 use crate::graphcut::{CrfProblem, CrfSolver, MoveConfig};
-use nalgebra::Vector3;
 use rayon::prelude::*;
 
 /// Label of the outlier class inside the CRF (exported as −1).
@@ -253,28 +253,36 @@ pub fn unary_costs(
     tau: f64,
     unary: &mut [f64],
 ) {
-    let kin = Kinematics::new(model, pose);
-    let placed = model.placed_ellipsoids(&kin);
+    let geo = PoseGeometry::new(model, pose);
     let pc = config.point_cost(tau);
     let cap = pc.cap();
     let outlier = config.outlier_cost(tau);
-    let reach: [f64; NUM_SEGMENTS] = std::array::from_fn(|k| placed[k].prepared.radii().max());
     unary
         .par_chunks_mut(CHUNK_POINTS * NUM_LABELS)
         .zip(points.par_chunks(CHUNK_POINTS))
         .for_each(|(u, pts)| {
-            for (row, p) in u.chunks_exact_mut(NUM_LABELS).zip(pts) {
-                let p = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                for k in 0..NUM_SEGMENTS {
-                    // |p − c| − r_max bounds the distance from below: beyond the
-                    // truncation the cost is the cap without a distance query.
-                    let lower = (p - placed[k].centre).norm() - reach[k];
-                    row[k] = if lower >= pc.truncation {
-                        cap
+            let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
+            let buf = to_f64(pts, &mut buf);
+            let mut near = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
+            for (k, e) in geo.segments.iter().enumerate() {
+                // A lower bound of the distance at or beyond the truncation means the
+                // cost is the cap, exactly what the exact distance would give; only
+                // the points nearer than that need the exact (iterative) distance.
+                let mut m = 0;
+                for (i, p) in buf.iter().enumerate() {
+                    let y = e.local(p);
+                    if e.distance_lower_bound(&y) >= pc.truncation {
+                        u[i * NUM_LABELS + k] = cap;
                     } else {
-                        pc.cost(placed[k].signed_distance(&p))
-                    };
+                        near[m] = (i, y);
+                        m += 1;
+                    }
                 }
+                e.signed_distances_batched(near[..m].iter().copied(), |i, d| {
+                    u[i * NUM_LABELS + k] = pc.cost(d)
+                });
+            }
+            for row in u.chunks_exact_mut(NUM_LABELS) {
                 row[NUM_SEGMENTS] = outlier;
             }
         });
@@ -448,4 +456,67 @@ pub fn hard_em(
         part_counts,
         outliers,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::kinematics::tests::pose_for_tests;
+    use crate::body::signed_distance_to_ellipsoid;
+
+    /// The unary with lower-bound skipping and lockstep root solves equals the unary
+    /// computed with one exact scalar query per point and segment.
+    #[test]
+    fn unary_matches_exact_distances() {
+        let model = BodyModel::default();
+        let config = EmConfig::default();
+        for seed in 0..3u64 {
+            let pose = pose_for_tests(seed + 2);
+            let joints = model.joints(&pose);
+            let mut s = seed * 7919 + 1;
+            let mut next = || {
+                s = s
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((s >> 11) as f64) / ((1u64 << 53) as f64) - 0.5
+            };
+            let points: Vec<[f32; 3]> = (0..1500)
+                .map(|i| {
+                    let j = joints[i % joints.len()];
+                    let spread = if i % 5 == 0 { 1.5 } else { 0.3 };
+                    [
+                        (j.x + spread * next()) as f32,
+                        (j.y + spread * next()) as f32,
+                        (j.z + spread * next()) as f32,
+                    ]
+                })
+                .collect();
+            let tau = 0.1 + 0.05 * seed as f64;
+            let mut unary = vec![0.0; points.len() * NUM_LABELS];
+            unary_costs(&model, &points, &pose, &config, tau, &mut unary);
+            let pc = config.point_cost(tau);
+            let frames = model.segment_transforms(&pose);
+            let ell = model.shape.ellipsoids();
+            let mut saturated = 0;
+            for (i, p) in points.iter().enumerate() {
+                let pc3 = nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                for k in 0..NUM_SEGMENTS {
+                    let local = frames[k].inverse_transform_point(&pc3).coords - ell[k].centre;
+                    let exact = pc.cost(signed_distance_to_ellipsoid(&ell[k].radii, &local));
+                    let got = unary[i * NUM_LABELS + k];
+                    assert!(
+                        (got - exact).abs() <= 1e-9 * exact.max(1.0),
+                        "point {i} segment {k}: {got} vs exact {exact}"
+                    );
+                    saturated += (got == pc.cap()) as usize;
+                }
+                assert_eq!(
+                    unary[i * NUM_LABELS + NUM_SEGMENTS],
+                    config.outlier_cost(tau)
+                );
+            }
+            // The skipping is exercised: many pairs are saturated.
+            assert!(saturated > points.len() * 4, "{saturated}");
+        }
+    }
 }

@@ -10,16 +10,13 @@
 //! have grown to the cloud size.
 
 use super::lm::{PoseObjective, N, NN};
-use crate::body::ellipsoid::PlacedEllipsoid;
-use crate::body::kinematics::SEGMENT_DOFS;
-use crate::body::{BodyModel, Kinematics, Pose, NUM_SEGMENTS};
-use nalgebra::Vector3;
+use crate::body::ellipsoid::SortedPlacement;
+use crate::body::residuals::{PoseGeometry, MAX_SEGMENT_DOFS};
+use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use rayon::prelude::*;
 
 /// Points per parallel chunk.
 pub const CHUNK_POINTS: usize = 512;
-/// At most this many parameters move one segment (root 6 + shoulder 3 + elbow 1).
-const MAX_SEGMENT_DOFS: usize = 10;
 
 /// Robust loss of the residuals.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -155,13 +152,15 @@ impl<'a> PointObjective<'a> {
 }
 
 #[inline]
-fn vec3(p: &[f32; 3]) -> Vector3<f64> {
-    Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
+fn vec3(p: &[f32; 3]) -> [f64; 3] {
+    [p[0] as f64, p[1] as f64, p[2] as f64]
 }
 
-/// Σ cost over labelled points for the given placed ellipsoids (one chunk).
+/// Σ cost over labelled points for the given placed ellipsoids (one chunk). A point
+/// whose distance lower bound already reaches the truncation costs the constant cap
+/// without an exact query (the same value the exact distance would give).
 fn chunk_cost(
-    placed: &[PlacedEllipsoid; NUM_SEGMENTS],
+    segments: &[SortedPlacement; NUM_SEGMENTS],
     pc: &PointCost,
     pts: &[[f32; 3]],
     labs: &[i32],
@@ -169,7 +168,13 @@ fn chunk_cost(
     let mut c = 0.0;
     for (p, &l) in pts.iter().zip(labs) {
         if l >= 0 && (l as usize) < NUM_SEGMENTS {
-            c += pc.cost(placed[l as usize].signed_distance(&vec3(p)));
+            let e = &segments[l as usize];
+            let y = e.local(&vec3(p));
+            c += if e.distance_lower_bound(&y) > pc.truncation {
+                pc.cap()
+            } else {
+                pc.cost(e.signed_distance_local(&y))
+            };
         }
     }
     c
@@ -177,32 +182,19 @@ fn chunk_cost(
 
 impl PoseObjective for PointObjective<'_> {
     fn cost(&mut self, pose: &Pose) -> f64 {
-        let kin = Kinematics::new(self.model, pose);
-        let placed = self.model.placed_ellipsoids(&kin);
+        let geo = PoseGeometry::new(self.model, pose);
         let pc = self.point_cost;
         self.partial_costs
             .par_iter_mut()
             .zip(self.points.par_chunks(CHUNK_POINTS))
             .zip(self.labels.par_chunks(CHUNK_POINTS))
-            .for_each(|((o, pts), labs)| *o = chunk_cost(&placed, &pc, pts, labs));
+            .for_each(|((o, pts), labs)| *o = chunk_cost(&geo.segments, &pc, pts, labs));
         self.partial_costs.iter().sum()
     }
 
     fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
-        let kin = Kinematics::new(self.model, pose);
-        let placed = self.model.placed_ellipsoids(&kin);
+        let geo = PoseGeometry::new(self.model, pose);
         let pc = self.point_cost;
-        // The parameters that move each segment, as index lists.
-        let dof_lists: [([usize; MAX_SEGMENT_DOFS], usize); NUM_SEGMENTS] =
-            std::array::from_fn(|k| {
-                let mut idx = [0usize; MAX_SEGMENT_DOFS];
-                let mut n = 0;
-                for (dof, slot) in (0..N).filter(|d| SEGMENT_DOFS[k] & (1 << d) != 0).zip(0..) {
-                    idx[slot] = dof;
-                    n += 1;
-                }
-                (idx, n)
-            });
         self.chunks
             .par_iter_mut()
             .zip(self.points.par_chunks(CHUNK_POINTS))
@@ -216,26 +208,30 @@ impl PoseObjective for PointObjective<'_> {
                         continue;
                     }
                     let k = l as usize;
+                    let e = &geo.segments[k];
                     let p = vec3(p);
-                    let q = placed[k].query(&p);
-                    let (c, w) = pc.cost_and_weight(q.distance);
+                    if e.distance_lower_bound(&e.local(&p)) > pc.truncation {
+                        // Truncated for sure: constant cost, zero weight.
+                        acc.cost += pc.cap();
+                        continue;
+                    }
+                    let (d, normal) = e.distance_and_normal(&p);
+                    let (c, w) = pc.cost_and_weight(d);
                     acc.cost += c;
                     if w == 0.0 {
                         continue;
                     }
-                    let (idx, n) = &dof_lists[k];
                     let mut jrow = [0.0; MAX_SEGMENT_DOFS];
-                    for a in 0..*n {
-                        // Moving the surface with velocity v changes the distance by −n·v.
-                        jrow[a] = -q.normal.dot(&kin.point_velocity(idx[a], &p));
-                    }
-                    let wr = w * q.distance;
-                    for a in 0..*n {
+                    let n = geo.jacobian_row(k, &p, &normal, &mut jrow);
+                    let idx = geo.segment_dofs(k);
+                    let wr = w * d;
+                    for a in 0..n {
                         let ia = idx[a];
                         acc.g[ia] += jrow[a] * wr;
                         let wj = w * jrow[a];
-                        for b in a..*n {
-                            acc.h[ia * N + idx[b]] += wj * jrow[b];
+                        let hrow = &mut acc.h[ia * N..(ia + 1) * N];
+                        for b in a..n {
+                            hrow[idx[b]] += wj * jrow[b];
                         }
                     }
                 }
@@ -267,6 +263,7 @@ mod tests {
     use super::*;
     use crate::body::kinematics::tests::pose_for_tests;
     use crate::body::pose_with_root_increment;
+    use nalgebra::Vector3;
 
     fn scattered(model: &BodyModel, pose: &Pose, n: usize) -> (Vec<[f32; 3]>, Vec<i32>) {
         let joints = model.joints(pose);
