@@ -144,7 +144,7 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
         },
     )?;
     let n = p.unary.len() / l;
-    ensure(n < u32::MAX as usize - 3, "unary", || {
+    ensure(n <= super::maxflow::MAX_NODES, "unary", || {
         "too many nodes".into()
     })?;
     if let Some(k) = p

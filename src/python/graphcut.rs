@@ -3,7 +3,8 @@
 use super::arrays::{f64_array, i64_array, to_numpy};
 use crate::graphcut::{
     alpha_beta_swap as swap_core, alpha_expansion as expansion_core, energy as energy_core,
-    grid_edges as grid_edges_core, Cost, CrfProblem, Graph, Labelling, MoveConfig,
+    grid_edges as grid_edges_core, maxflow::MAX_NODES, Cost, CrfProblem, Graph, Labelling,
+    MoveConfig,
 };
 use crate::Error;
 use numpy::{PyArrayDescrMethods, PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
@@ -114,10 +115,10 @@ impl PyGraph {
     #[new]
     #[pyo3(signature = (n_nodes, dtype=None, edge_hint=0))]
     fn new(n_nodes: i64, dtype: Option<&Bound<PyAny>>, edge_hint: i64) -> PyResult<Self> {
-        if n_nodes <= 0 || n_nodes >= u32::MAX as i64 - 3 {
+        if n_nodes <= 0 || n_nodes > MAX_NODES as i64 {
             return Err(Error::invalid(
                 "n_nodes",
-                format!("must be in 1..{}, got {n_nodes}", u32::MAX - 3),
+                format!("must be in 1..={MAX_NODES}, got {n_nodes}"),
             )
             .into());
         }
