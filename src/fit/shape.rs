@@ -272,8 +272,8 @@ fn frame_system(
         for a in 0..S {
             let wa = w * js[a];
             sys.gs[a] += js[a] * wr;
-            for b in a..S {
-                sys.hss[a * S + b] += wa * js[b];
+            for (b, &jb) in js.iter().enumerate().skip(a) {
+                sys.hss[a * S + b] += wa * jb;
             }
             for (b, &jb) in jp.iter().enumerate() {
                 if jb != 0.0 {
@@ -287,8 +287,8 @@ fn frame_system(
             }
             let wa = w * jp[a];
             sys.gp[a] += jp[a] * wr;
-            for b in a..P {
-                sys.hpp[a * P + b] += wa * jp[b];
+            for (b, &jb) in jp.iter().enumerate().skip(a) {
+                sys.hpp[a * P + b] += wa * jb;
             }
         }
     }
