@@ -1,5 +1,5 @@
 # Type stubs for the native module depthpose._core (checked by tests/test_stub.py).
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from os import PathLike
 from typing import Any
 
@@ -260,6 +260,22 @@ class BodyModel:
     def ellipsoids(
         self, pose: npt.NDArray[np.float64]
     ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+    @property
+    def shape_factor_names(self) -> list[str]: ...
+    def with_shape_factors(self, factors: npt.ArrayLike) -> BodyModel: ...
+    def fit_shape(
+        self,
+        depths: npt.NDArray[np.generic] | Sequence[npt.NDArray[np.generic]],
+        camera: Camera,
+        poses: npt.NDArray[np.float64] | Sequence[npt.NDArray[np.float64]],
+        *,
+        masks: npt.NDArray[np.bool_] | Sequence[npt.NDArray[np.bool_]] | None = None,
+        iterations: int = 3,
+        config: FitConfig | None = None,
+        lm_iterations: int = 20,
+        prior_weight: float = 1000.0,
+        bounds: tuple[float, float] = (0.7, 1.4),
+    ) -> ShapeFitResult: ...
 
 # ---- fit (src/python/fit.rs) --------------------------------------------------------
 class FitConfig:
@@ -321,6 +337,27 @@ class FitResult:
     def part_counts(self) -> dict[str, int]: ...
     @property
     def outliers(self) -> int: ...
+
+class ShapeFitResult:
+    @property
+    def model(self) -> BodyModel: ...
+    @property
+    def factors(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def factor_names(self) -> list[str]: ...
+    def factors_dict(self) -> dict[str, float]: ...
+    @property
+    def poses(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def joints(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def labels(self) -> npt.NDArray[np.int16]: ...
+    @property
+    def energy(self) -> float: ...
+    @property
+    def energy_trace(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def rounds(self) -> int: ...
 
 def fit_pose(
     depth: npt.NDArray[np.generic],

@@ -3,21 +3,30 @@
 `fit_pose` fits the body model to the foreground of a depth image from an initial pose;
 `pose_from_joints` is inverse kinematics (the pose whose 15 joints best match given
 joint positions, NaN rows skipped). Both default to `BodyModel()` (1.75 m reference
-proportions).
+proportions). `fit_shape` calibrates the body shape (12 symmetric scale factors of
+segment lengths and radii) on a few frames together with their poses; it is
+`BodyModel.fit_shape` of the base model.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
 
-from depthpose._core import BodyModel, Camera, FitConfig, FitResult
+from depthpose._core import BodyModel, Camera, FitConfig, FitResult, ShapeFitResult
 from depthpose._core import fit_pose as _fit_pose
 from depthpose._core import pose_from_joints as _pose_from_joints
 
-__all__ = ["FitConfig", "FitResult", "fit_pose", "pose_from_joints"]
+__all__ = [
+    "FitConfig",
+    "FitResult",
+    "ShapeFitResult",
+    "fit_pose",
+    "fit_shape",
+    "pose_from_joints",
+]
 
 
 def _config(config: None | FitConfig | Mapping[str, Any]) -> FitConfig | None:
@@ -64,3 +73,40 @@ def pose_from_joints(
 ) -> np.ndarray:
     """The pose (22,) whose joints best match `joints` (15, 3) in the camera frame."""
     return _pose_from_joints(np.asarray(joints), model, None if init is None else np.asarray(init))
+
+
+def fit_shape(
+    depths: np.ndarray | Sequence[np.ndarray],
+    camera: Camera,
+    poses: np.ndarray | Sequence[np.ndarray],
+    *,
+    model: BodyModel | None = None,
+    masks: np.ndarray | Sequence[np.ndarray] | None = None,
+    iterations: int = 3,
+    config: None | FitConfig | Mapping[str, Any] = None,
+    lm_iterations: int = 20,
+    prior_weight: float = 1000.0,
+    bounds: tuple[float, float] = (0.7, 1.4),
+) -> ShapeFitResult:
+    """Calibrate the body shape of `model` (default `BodyModel()`) on a few frames.
+
+    `depths`: (F, H, W) or a list of (H, W) depth images (float metres or uint16 mm);
+    `poses`: (F, 22) initial poses (e.g. the tracker's or `fit_pose`'s on those frames);
+    `masks`: optional (F, H, W) person masks. Alternates per-frame pose/label fits with a
+    joint Levenberg-Marquardt over the 12 shape factors (`BodyModel.shape_factor_names`,
+    each within `bounds`) and all poses, for at most `iterations` rounds; the energy never
+    increases. Returns a `ShapeFitResult`: `model` (the calibrated `BodyModel`),
+    `factors` (12,), `poses` (F, 22), `joints` (F, 15, 3), `labels`, `energy_trace`.
+    """
+    base = BodyModel() if model is None else model
+    return base.fit_shape(
+        depths,
+        camera,
+        poses,
+        masks=masks,
+        iterations=iterations,
+        config=_config(config),
+        lm_iterations=lm_iterations,
+        prior_weight=prior_weight,
+        bounds=bounds,
+    )

@@ -421,6 +421,80 @@ impl BodyShape {
     }
 }
 
+/// Names of the shape factors: a small symmetric (left = right) parameterisation of the
+/// body shape for calibration, each a scale factor of a group of [`BodyShape`]
+/// parameters relative to a base shape (see [`BodyShape::scaled`]).
+pub const SHAPE_FACTOR_NAMES: [&str; NUM_SHAPE_FACTORS] = [
+    "torso_length",
+    "torso_width",
+    "torso_depth",
+    "head_neck",
+    "upper_arm",
+    "forearm",
+    "thigh",
+    "shin",
+    "shoulder_width",
+    "hip_width",
+    "arm_radius",
+    "leg_radius",
+];
+
+/// Number of shape factors.
+pub const NUM_SHAPE_FACTORS: usize = 12;
+
+/// Shape factors in [`SHAPE_FACTOR_NAMES`] order (1 = the base shape).
+pub type ShapeFactors = [f64; NUM_SHAPE_FACTORS];
+
+/// The [`BodyShape`] parameters (indices into [`SHAPE_PARAM_NAMES`]) each shape factor
+/// scales. Every shape parameter belongs to exactly one factor.
+pub const SHAPE_FACTOR_GROUPS: [&[usize]; NUM_SHAPE_FACTORS] = [
+    &[0, 3],                 // torso_length: hip centre → shoulder line, mid-spine offset
+    &[17, 19],               // torso_width: chest and pelvis half-breadths
+    &[18, 20],               // torso_depth: chest and pelvis half-depths
+    &[1, 2, 13, 14, 15, 16], // head_neck: neck length, head offset, head radii, neck radius
+    &[6],                    // upper_arm length
+    &[7, 8],                 // forearm + hand length
+    &[9],                    // thigh length
+    &[10, 11, 12],           // shin + ankle height + foot length
+    &[4],                    // shoulder_width
+    &[5],                    // hip_width
+    &[21, 22, 23],           // arm radii: upper arm, forearm, hand
+    &[24, 25, 26],           // leg radii: thigh, shin, foot
+];
+
+impl BodyShape {
+    /// This shape with every parameter of factor j's group multiplied by `factors[j]`.
+    /// Factors must be finite and positive, and the result must pass
+    /// [`BodyShape::from_vec`].
+    pub fn scaled(&self, factors: &[f64]) -> Result<BodyShape> {
+        if factors.len() != NUM_SHAPE_FACTORS {
+            return Err(Error::invalid(
+                "factors",
+                format!(
+                    "needs {NUM_SHAPE_FACTORS} shape factors, got {}",
+                    factors.len()
+                ),
+            ));
+        }
+        if let Some(i) = factors.iter().position(|f| !(f.is_finite() && *f > 0.0)) {
+            return Err(Error::invalid(
+                "factors",
+                format!(
+                    "{} must be finite and > 0, got {}",
+                    SHAPE_FACTOR_NAMES[i], factors[i]
+                ),
+            ));
+        }
+        let mut v = self.to_vec();
+        for (group, f) in SHAPE_FACTOR_GROUPS.iter().zip(factors) {
+            for &i in *group {
+                v[i] *= f;
+            }
+        }
+        BodyShape::from_vec(&v)
+    }
+}
+
 /// Smallest and largest admissible shape parameter (m).
 const MIN_SHAPE_VALUE: f64 = 1e-3;
 const MAX_SHAPE_VALUE: f64 = 2.0;
@@ -580,6 +654,14 @@ impl BodyModel {
     /// A model with an explicit shape.
     pub fn with_shape(shape: BodyShape) -> Self {
         BodyModel { shape }
+    }
+
+    /// A model whose shape is this one's scaled by shape `factors` (see
+    /// [`BodyShape::scaled`]).
+    pub fn with_shape_factors(&self, factors: &[f64]) -> Result<Self> {
+        Ok(BodyModel {
+            shape: self.shape.scaled(factors)?,
+        })
     }
 
     /// Pose parameter names.

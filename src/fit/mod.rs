@@ -9,6 +9,7 @@ pub mod em;
 pub mod ik;
 pub mod lm;
 pub mod objective;
+pub mod shape;
 
 use crate::body::{pose_from_slice, BodyModel, Pose, NUM_JOINTS, NUM_SEGMENTS};
 use crate::camera::Camera;
@@ -20,6 +21,7 @@ pub use em::{hard_em, EmConfig, EmResult, EmTermination};
 pub use ik::pose_from_joints;
 pub use lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, Termination};
 pub use objective::Loss;
+pub use shape::{fit_shape, shape_lm, ShapeConfig, ShapeFrame, ShapeResult};
 
 /// Fewer foreground points than this cannot constrain 22 parameters.
 pub const MIN_POINTS: usize = 50;

@@ -1,14 +1,17 @@
 //! `BodyModel` for Python: kinematics, distances, Jacobians, rendering, meshes.
 
+use super::arrays::{bool_array, depth_array};
 use super::arrays::{f32_array, f64_array, i64_array, to_numpy};
 use super::camera::PyCamera;
+use super::fit::{PyFitConfig, PyShapeFitResult};
 use crate::body::superquadric::MeshConfig;
 use crate::body::{
     pose_from_slice, pose_with_root_increment, BodyModel, BodyShape, Pose, JOINT_NAMES, NUM_JOINTS,
-    NUM_PARAMS, NUM_SEGMENTS, PARAM_NAMES, PART_NAMES, SHAPE_PARAM_NAMES,
+    NUM_PARAMS, NUM_SEGMENTS, PARAM_NAMES, PART_NAMES, SHAPE_FACTOR_NAMES, SHAPE_PARAM_NAMES,
 };
 use crate::error::Error;
-use numpy::PyArrayDyn;
+use crate::fit::{self, FitConfig, ShapeConfig, ShapeFrame};
+use numpy::{PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 type F64Array<'py> = Bound<'py, PyArrayDyn<f64>>;
@@ -31,6 +34,49 @@ fn points_arg(obj: &Bound<PyAny>) -> PyResult<Vec<[f32; 3]>> {
         .into());
     }
     Ok(a.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
+}
+
+/// The items of a per-frame argument: a list/tuple of arrays or an array whose first
+/// axis is the frame (`ndim` = dimensions of the stacked array).
+fn frame_items<'py>(
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+    ndim: usize,
+) -> PyResult<Vec<Bound<'py, PyAny>>> {
+    let items: Vec<Bound<'py, PyAny>> = if let Ok(arr) = obj.cast::<PyUntypedArray>() {
+        if arr.ndim() != ndim {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "expected a list of frames or a {ndim}-D array, got shape {:?}",
+                    arr.shape()
+                ),
+            )
+            .into());
+        }
+        (0..arr.shape()[0])
+            .map(|i| obj.get_item(i))
+            .collect::<PyResult<_>>()?
+    } else if obj.is_instance_of::<pyo3::types::PyList>()
+        || obj.is_instance_of::<pyo3::types::PyTuple>()
+    {
+        obj.try_iter()?.collect::<PyResult<_>>()?
+    } else {
+        let ty = obj
+            .get_type()
+            .name()
+            .map(|n| n.to_string())
+            .unwrap_or_else(|_| "?".into());
+        return Err(Error::invalid(
+            name,
+            format!("expected a list of arrays or a numpy array, got {ty}"),
+        )
+        .into());
+    };
+    if items.is_empty() {
+        return Err(Error::invalid(name, "needs at least one frame").into());
+    }
+    Ok(items)
 }
 
 /// The articulated 16-segment, 22-parameter body model (see the Rust docs of
@@ -317,6 +363,132 @@ impl PyBodyModel {
             to_numpy(py, r, &[NUM_SEGMENTS, 3, 3]),
             to_numpy(py, e, &[NUM_SEGMENTS, 3]),
         ))
+    }
+
+    /// Names of the shape factors of `with_shape_factors` and `fit_shape`.
+    #[getter]
+    fn shape_factor_names(&self) -> Vec<&'static str> {
+        SHAPE_FACTOR_NAMES.to_vec()
+    }
+
+    /// A model whose shape is this one's with each factor group scaled (12 factors,
+    /// `shape_factor_names` order, 1 = unchanged).
+    fn with_shape_factors(&self, factors: &Bound<PyAny>) -> PyResult<Self> {
+        let a = f64_array(factors, "factors", Some(1), true)?;
+        Ok(PyBodyModel {
+            inner: self.inner.with_shape_factors(&a.data)?,
+        })
+    }
+
+    /// Calibrates the body shape on one or several frames: `depths` (list of (H, W) or
+    /// (F, H, W); float metres or uint16 mm), `poses` (F, 22) initial poses, `masks`
+    /// optional person masks. Alternates per-frame pose/label fits (hard EM) with a
+    /// joint Levenberg-Marquardt over the shape factors and all poses for `iterations`
+    /// rounds at most. Returns a `ShapeFitResult` (`model`, `factors`, `poses`, ...).
+    #[pyo3(signature = (depths, camera, poses, *, masks=None, iterations=3, config=None,
+        lm_iterations=20, prior_weight=1000.0, bounds=(0.7, 1.4)))]
+    #[allow(clippy::too_many_arguments)]
+    fn fit_shape(
+        &self,
+        py: Python<'_>,
+        depths: &Bound<'_, PyAny>,
+        camera: &PyCamera,
+        poses: &Bound<'_, PyAny>,
+        masks: Option<&Bound<'_, PyAny>>,
+        iterations: i64,
+        config: Option<&PyFitConfig>,
+        lm_iterations: i64,
+        prior_weight: f64,
+        bounds: (f64, f64),
+    ) -> PyResult<PyShapeFitResult> {
+        let cam = camera.inner;
+        let (h, w) = (cam.height, cam.width);
+        let depth_items = frame_items(depths, "depths", 3)?;
+        let mut ds = Vec::with_capacity(depth_items.len());
+        for (i, d) in depth_items.iter().enumerate() {
+            let name = format!("depths[{i}]");
+            let a = depth_array(d, &name)?;
+            cam.check_image(&name, a.shape[0], a.shape[1])?;
+            ds.push(a.data);
+        }
+        let pose_items = frame_items(poses, "poses", 2)?;
+        if pose_items.len() != ds.len() {
+            return Err(Error::invalid(
+                "poses",
+                format!(
+                    "has {} poses for {} depth frames",
+                    pose_items.len(),
+                    ds.len()
+                ),
+            )
+            .into());
+        }
+        let mut ps: Vec<Pose> = Vec::with_capacity(ds.len());
+        for (i, p) in pose_items.iter().enumerate() {
+            ps.push(pose_arg(p, &format!("poses[{i}]"))?);
+        }
+        let ms: Option<Vec<Vec<bool>>> = match masks {
+            None => None,
+            Some(m) => {
+                let items = frame_items(m, "masks", 3)?;
+                if items.len() != ds.len() {
+                    return Err(Error::invalid(
+                        "masks",
+                        format!("has {} masks for {} depth frames", items.len(), ds.len()),
+                    )
+                    .into());
+                }
+                Some(
+                    items
+                        .iter()
+                        .enumerate()
+                        .map(|(i, m)| bool_array(m, &format!("masks[{i}]"), &[h, w]))
+                        .collect::<PyResult<_>>()?,
+                )
+            }
+        };
+        let count = |v: i64, name: &str| -> PyResult<usize> {
+            if v >= 1 {
+                Ok(v as usize)
+            } else {
+                Err(Error::invalid(name, format!("must be >= 1, got {v}")).into())
+            }
+        };
+        let cfg = ShapeConfig {
+            fit: match config {
+                Some(c) => c.to_rust()?,
+                None => FitConfig::default(),
+            },
+            rounds: count(iterations, "iterations")?,
+            lm_iterations: count(lm_iterations, "lm_iterations")?,
+            lower: bounds.0,
+            upper: bounds.1,
+            prior_weight,
+            ..ShapeConfig::default()
+        };
+        cfg.validate().map_err(|e| match e {
+            Error::InvalidArgument { name, message } if name == "lower" || name == "upper" => {
+                Error::invalid("bounds", format!("{name} {message}"))
+            }
+            other => other,
+        })?;
+        let base = self.inner.clone();
+        let result = py.detach(|| {
+            let frames: Vec<ShapeFrame> = ds
+                .iter()
+                .enumerate()
+                .map(|(i, d)| ShapeFrame {
+                    depth: d,
+                    mask: ms.as_ref().map(|m| m[i].as_slice()),
+                })
+                .collect();
+            fit::fit_shape(&frames, &cam, &base, &ps, &cfg)
+        })?;
+        Ok(PyShapeFitResult {
+            result,
+            height: h,
+            width: w,
+        })
     }
 
     fn __repr__(&self) -> String {
