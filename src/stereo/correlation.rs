@@ -84,13 +84,13 @@ fn moments(img: &[f32], width: usize, height: usize, half: usize, min_var: f32) 
         .filter(|(y, _)| *y >= half && *y + half < height)
         .for_each(|(y, row)| {
             let (top, bottom) = ((y - half) * stride, (y + half + 1) * stride);
-            for x in half..width - half {
+            for (x, slot) in row.iter_mut().enumerate().take(width - half).skip(half) {
                 let (l, r) = (x - half, x + half + 1);
                 let box_sum = |s: &[f64]| s[bottom + r] - s[bottom + l] - s[top + r] + s[top + l];
                 let m = box_sum(&s1) * inv_n;
                 let v = (box_sum(&s2) * inv_n - m * m).max(0.0);
                 // Untextured windows get variance 0: they are never matched.
-                row[x] = [m as f32, if v as f32 >= min_var { v as f32 } else { 0.0 }];
+                *slot = [m as f32, if v as f32 >= min_var { v as f32 } else { 0.0 }];
             }
         });
     Moments { mv }
