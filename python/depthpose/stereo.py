@@ -82,7 +82,7 @@ def match(
     ``left``/``right``: gray (H, W) or colour (H, W, 3) arrays, uint8 or float, same shape.
     ``max_disparity``: largest disparity searched (default: the whole line).
     ``window``: odd side of the correlation window. ``threshold``: smallest accepted
-    correlation (default 0.45). ``num_seeds``: random seeds matched by exhaustive search.
+    correlation (default 0.47). ``num_seeds``: random seeds matched by exhaustive search.
     ``seeds``: extra seeds, an (N, 3) array of rows (x, y, d). ``seed``: RNG seed.
     ``return_confidence``: also return the correlation of each match (NaN unmatched).
     ``lr_check``: keep only matches confirmed right-to-left (twice the time).

@@ -20,11 +20,11 @@ pub enum Similarity {
     Ncc,
 }
 
-/// Window moments of one image: mean and variance per pixel (variance 0 where the
-/// window leaves the image or has too little texture to be matched).
+/// Window moments of one image: [mean, variance] per pixel (variance 0 where the
+/// window leaves the image or has too little texture to be matched). Interleaved, so a
+/// candidate reads both from one cache line.
 struct Moments {
-    mean: Vec<f32>,
-    var: Vec<f32>,
+    mv: Vec<[f32; 2]>,
 }
 
 /// Moment images and normalised pixels of a rectified pair; scores candidates.
@@ -75,28 +75,25 @@ fn moments(img: &[f32], width: usize, height: usize, half: usize, min_var: f32) 
     }
     let side = 2 * half + 1;
     let inv_n = 1.0 / (side * side) as f64;
-    let mut mean = vec![0.0f32; width * height];
-    let mut var = vec![0.0f32; width * height];
+    let mut mv = vec![[0.0f32; 2]; width * height];
     if width < side || height < side {
-        return Moments { mean, var };
+        return Moments { mv };
     }
-    mean.par_chunks_mut(width)
-        .zip(var.par_chunks_mut(width))
+    mv.par_chunks_mut(width)
         .enumerate()
         .filter(|(y, _)| *y >= half && *y + half < height)
-        .for_each(|(y, (mrow, vrow))| {
+        .for_each(|(y, row)| {
             let (top, bottom) = ((y - half) * stride, (y + half + 1) * stride);
-            for x in half..width - half {
+            for (x, slot) in row.iter_mut().enumerate().take(width - half).skip(half) {
                 let (l, r) = (x - half, x + half + 1);
                 let box_sum = |s: &[f64]| s[bottom + r] - s[bottom + l] - s[top + r] + s[top + l];
                 let m = box_sum(&s1) * inv_n;
                 let v = (box_sum(&s2) * inv_n - m * m).max(0.0);
-                mrow[x] = m as f32;
                 // Untextured windows get variance 0: they are never matched.
-                vrow[x] = if v as f32 >= min_var { v as f32 } else { 0.0 };
+                *slot = [m as f32, if v as f32 >= min_var { v as f32 } else { 0.0 }];
             }
         });
-    Moments { mean, var }
+    Moments { mv }
 }
 
 impl Correlator {
@@ -149,7 +146,7 @@ impl Correlator {
     /// Whether the left window at (x, y) has texture (and lies inside the image).
     #[inline]
     pub fn left_textured(&self, x: usize, y: usize) -> bool {
-        self.ml.var[y * self.width + x] > 0.0
+        self.ml.mv[y * self.width + x][1] > 0.0
     }
 
     /// Correlation of the left window at (x, y) with the right window at (x − d, y).
@@ -160,11 +157,11 @@ impl Correlator {
     pub fn score(&self, x: usize, y: usize, d: usize) -> f32 {
         let il = y * self.width + x;
         let ir = il - d;
-        let (vl, vr) = (self.ml.var[il], self.mr.var[ir]);
+        let ([ml, vl], [mr, vr]) = (self.ml.mv[il], self.mr.mv[ir]);
         if vl == 0.0 || vr == 0.0 {
             return NO_CORRELATION;
         }
-        let cov = self.cross(x, y, d) * self.inv_n - self.ml.mean[il] * self.mr.mean[ir];
+        let cov = self.cross(x, y, d) * self.inv_n - ml * mr;
         self.similarity_of(cov, vl, vr)
     }
 
@@ -180,21 +177,20 @@ impl Correlator {
             return [at(d.checked_sub(1)), at(Some(d)), at(Some(d + 1))];
         }
         let il = y * self.width + x;
-        let vl = self.ml.var[il];
+        let [ml, vl] = self.ml.mv[il];
         if vl == 0.0 {
             return [NO_CORRELATION; 3];
         }
         let cross = self.cross3(x, y, d);
-        let ml = self.ml.mean[il];
         // cross3 returns the sums for d + 1, d, d − 1.
         let mut out = [NO_CORRELATION; 3];
         for (k, slot) in out.iter_mut().enumerate() {
             let ir = il + 1 - d - k; // right pixel at disparity d − 1 + k
-            let vr = self.mr.var[ir];
+            let [mr, vr] = self.mr.mv[ir];
             *slot = if vr == 0.0 {
                 NO_CORRELATION
             } else {
-                let cov = cross[2 - k] * self.inv_n - ml * self.mr.mean[ir];
+                let cov = cross[2 - k] * self.inv_n - ml * mr;
                 self.similarity_of(cov, vl, vr)
             };
         }

@@ -7,7 +7,7 @@
 //! from. A popped candidate is accepted only when its left and its right pixel are both
 //! still free (uniqueness), so the disparity space is sampled only around surfaces.
 
-use super::correlation::Correlator;
+use super::correlation::{Correlator, NO_CORRELATION};
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -117,7 +117,19 @@ pub fn search_line(
 ) -> Option<(usize, f32)> {
     let top = max_d.min(corr.max_disparity_at(x));
     scores.clear();
-    scores.extend((0..=top).map(|d| corr.score(x, y, d)));
+    scores.resize(top + 1, NO_CORRELATION);
+    if top == 0 {
+        scores[0] = corr.score(x, y, 0);
+    }
+    // Three disparities per pass over the left window: d − 1, d, d + 1 for d = 1, 4, ….
+    // The last pass may centre on top + 1 (scored as NO_CORRELATION, then dropped).
+    for d in (1..=top + 1).step_by(3) {
+        for (k, c) in corr.score3(x, y, d, top).into_iter().enumerate() {
+            if let Some(slot) = scores.get_mut(d + k - 1) {
+                *slot = c;
+            }
+        }
+    }
     let (best_d, best) =
         scores
             .iter()
@@ -178,21 +190,21 @@ pub fn random_seeds(
 /// Largest disparity the grower can store (its per-pixel state holds 16-bit values).
 pub const DISPARITY_LIMIT: usize = i16::MAX as usize;
 
-/// Per left pixel: its match (or `NO_MATCH`) and a cache of the correlations at
-/// disparities `cached_d` − 1, `cached_d`, `cached_d` + 1 (`cached_d` = `NOT_CACHED`
-/// when empty). Neighbours usually grow into a pixel with the same d, and the subpixel
-/// step needs the same three values; 16 bytes keep one pixel in one cache line.
+/// Per left pixel: a cache of the correlations at disparities `cached_d` − 1,
+/// `cached_d`, `cached_d` + 1 (`cached_d` = `NOT_CACHED` when empty). Neighbours usually
+/// grow into a pixel with the same d, and the subpixel step needs the same three
+/// values. The match itself lives in a separate, compact array: the growing loop tests
+/// it for every neighbour, and a 2-byte state keeps that test in cache where a 16-byte
+/// cell would miss.
 #[derive(Clone, Copy)]
-struct Cell {
-    disp: i16,
+struct Cache {
     cached_d: u16,
     scores: [f32; 3],
 }
 
 const NO_MATCH: i16 = -1;
 const NOT_CACHED: u16 = u16::MAX;
-const EMPTY_CELL: Cell = Cell {
-    disp: NO_MATCH,
+const EMPTY_CACHE: Cache = Cache {
     cached_d: NOT_CACHED,
     scores: [0.0; 3],
 };
@@ -201,7 +213,9 @@ const EMPTY_CELL: Cell = Cell {
 pub struct Grower {
     queue: BucketQueue,
     right_used: Vec<bool>,
-    cells: Vec<Cell>,
+    /// Disparity of each left pixel of the band, `NO_MATCH` where none.
+    disp: Vec<i16>,
+    cache: Vec<Cache>,
     /// The rows this grower works on: matches never grow out of them. Rows are
     /// independent for uniqueness (epipolar lines), so bands can grow in parallel.
     rows: Range<usize>,
@@ -212,7 +226,8 @@ impl Grower {
         Grower {
             queue: BucketQueue::new(),
             right_used: Vec::new(),
-            cells: Vec::new(),
+            disp: Vec::new(),
+            cache: Vec::new(),
             rows: 0..0,
         }
     }
@@ -238,8 +253,10 @@ impl Grower {
         let max_d = max_d.min(DISPARITY_LIMIT);
         self.right_used.clear();
         self.right_used.resize(n, false);
-        self.cells.clear();
-        self.cells.resize(n, EMPTY_CELL);
+        self.disp.clear();
+        self.disp.resize(n, NO_MATCH);
+        self.cache.clear();
+        self.cache.resize(n, EMPTY_CACHE);
         self.queue.reset(threshold);
 
         for &(x, y, d) in seeds {
@@ -257,10 +274,10 @@ impl Grower {
 
         while let Some(cand) = self.queue.pop() {
             let (idx, d) = (cand.idx as usize, cand.d as usize);
-            if self.cells[idx].disp != NO_MATCH || self.right_used[idx - d] {
+            if self.disp[idx] != NO_MATCH || self.right_used[idx - d] {
                 continue; // uniqueness: one of the two pixels is taken already
             }
-            self.cells[idx].disp = d as i16;
+            self.disp[idx] = d as i16;
             self.right_used[idx - d] = true;
             let (x, y) = (idx % w, rows.start + idx / w);
             let neighbours = [
@@ -274,10 +291,10 @@ impl Grower {
                     continue;
                 }
                 let nidx = ny * w + nx - first;
-                let cell = &mut self.cells[nidx];
-                if cell.disp != NO_MATCH {
+                if self.disp[nidx] != NO_MATCH {
                     continue;
                 }
+                let cell = &mut self.cache[nidx];
                 let top = max_d.min(corr.max_disparity_at(nx));
                 if d > top + 1 {
                     continue; // even d − 1 is out of range here
@@ -310,13 +327,11 @@ impl Grower {
     /// The integer disparity of every left pixel of its rows after [`Grower::grow`],
     /// `UNMATCHED` where none, appended to `out`.
     pub fn disparity(&self, out: &mut Vec<i32>) {
-        out.extend(self.cells.iter().map(|c| {
-            if c.disp == NO_MATCH {
-                UNMATCHED
-            } else {
-                c.disp as i32
-            }
-        }));
+        out.extend(
+            self.disp
+                .iter()
+                .map(|&d| if d == NO_MATCH { UNMATCHED } else { d as i32 }),
+        );
     }
 
     /// Correlations at d − 1, d, d + 1 of left pixel (x, y) after [`Grower::grow`]
@@ -332,7 +347,7 @@ impl Grower {
         if !self.rows.contains(&y) {
             return corr.score3(x, y, d, top);
         }
-        match self.cells.get((y - self.rows.start) * corr.width() + x) {
+        match self.cache.get((y - self.rows.start) * corr.width() + x) {
             Some(cell) if cell.cached_d as usize == d => cell.scores,
             _ => corr.score3(x, y, d, top),
         }
@@ -390,6 +405,18 @@ mod tests {
         let mut scratch = Vec::new();
         let (d, c) = search_line(&corr, 40, 4, 30, 0.8, &mut scratch).unwrap();
         assert_eq!(d, shift);
+        // The scratch holds the score of every disparity 0..=top, whatever top is
+        // modulo the three disparities scored per pass.
+        for max_d in 0..12 {
+            search_line(&corr, 40, 4, max_d, 1.0, &mut scratch);
+            assert_eq!(scratch.len(), max_d + 1);
+            for (dd, &c) in scratch.iter().enumerate() {
+                assert!(
+                    (c - corr.score(40, 4, dd)).abs() < 1e-5,
+                    "max_d {max_d} d {dd}"
+                );
+            }
+        }
         assert!(c > 0.95); // not 1: the two images are normalised by different global gains
                            // A texture repeating every 6 columns (plus independent noise in each image)
                            // matches about equally well at d and d ± 6.

@@ -82,7 +82,7 @@ impl Default for StereoConfig {
     fn default() -> Self {
         StereoConfig {
             window: 5,
-            threshold: 0.45,
+            threshold: 0.47,
             num_seeds: 2000,
             max_disparity: None,
             seed_distinctness: 0.8,
@@ -239,6 +239,60 @@ pub fn match_stereo_seeded(
     if height < config.window || width < config.window {
         return Ok(StereoResult::empty(height, width));
     }
+    // Rows are padded by reflection (the same rows in both images, since the pair is
+    // rectified), so windows of the top and bottom `half` rows stay correct and those
+    // rows are matched too; the result is cropped back.
+    let left = pad_rows(left, width, height, half);
+    let right = pad_rows(right, width, height, half);
+    let padded: Vec<Seed> = seeds
+        .iter()
+        .map(|s| Seed {
+            y: s.y + half,
+            ..*s
+        })
+        .collect();
+    let mut res = match_padded(
+        &left,
+        &right,
+        height + 2 * half,
+        width,
+        config,
+        max_d,
+        &padded,
+    )?;
+    let rows = half * width..(half + height) * width;
+    res.disparity = res.disparity[rows.clone()].to_vec();
+    res.confidence = res.confidence[rows].to_vec();
+    res.height = height;
+    Ok(res)
+}
+
+/// `img` (row-major `height`×`width`) with `pad` rows above and below, reflected about
+/// the first and the last row (row −k is row k). Needs `pad` < `height`.
+fn pad_rows(img: &[f32], width: usize, height: usize, pad: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(width * (height + 2 * pad));
+    for k in (1..=pad).rev() {
+        out.extend_from_slice(&img[k * width..(k + 1) * width]);
+    }
+    out.extend_from_slice(img);
+    for k in 1..=pad {
+        let r = height - 1 - k;
+        out.extend_from_slice(&img[r * width..(r + 1) * width]);
+    }
+    out
+}
+
+/// [`match_stereo_seeded`] on validated, row-padded images.
+fn match_padded(
+    left: &[f32],
+    right: &[f32],
+    height: usize,
+    width: usize,
+    config: &StereoConfig,
+    max_d: usize,
+    seeds: &[Seed],
+) -> Result<StereoResult> {
+    let half = config.window / 2;
 
     let Some(corr) = Correlator::new(
         left,

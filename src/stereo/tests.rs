@@ -481,3 +481,27 @@ fn tall_images_grow_in_bands_without_seams() {
         );
     }
 }
+
+#[test]
+fn top_and_bottom_rows_are_matched_through_reflected_padding() {
+    // Rows within half a window of the top and bottom have their windows completed by
+    // reflection (the same rows in both images), so they are matched correctly too.
+    let (w, h) = (60, 30);
+    let (left, right, truth, _) = random_dots(w, h, 6, 6, (0, 0, 0, 0));
+    let cfg = StereoConfig {
+        max_disparity: Some(12),
+        num_seeds: 100,
+        min_segment: 0,
+        ..Default::default()
+    };
+    let res = match_stereo(&left, &right, h, w, &cfg).unwrap();
+    for y in [0, 1, h - 2, h - 1] {
+        for x in 12..w - 2 {
+            let (d, t) = (res.disparity[y * w + x], truth[y * w + x]);
+            assert!(!d.is_nan(), "({x}, {y}) unmatched");
+            assert!((d - t).abs() < 0.5, "({x}, {y}): {d} vs {t}");
+        }
+    }
+    // Columns within half a window of the left or right border are not padded.
+    assert!((0..h).all(|y| res.disparity[y * w + w - 1].is_nan()));
+}
