@@ -26,9 +26,8 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-
 import depthpose
+import numpy as np
 from depthpose import batch, synth
 from depthpose.pipeline import estimate_frames
 from depthpose.sequence import open_sequence
@@ -153,13 +152,17 @@ def main() -> None:
         print("|---|---|")
         print(f"| estimate, frames/s | {n / est_s:.1f} |")
         for key, r in rows.items():
-            print(f"| batch {key[0]} proc × {key[1]} thread, frames/s | {r['frames'] / r['wall']:.1f} |")
+            fps = r["frames"] / r["wall"]
+            print(f"| batch {key[0]} proc × {key[1]} thread, frames/s | {fps:.1f} |")
         print(f"| speed-up 2 workers vs 1 | {one['wall'] / two['wall']:.2f}× |")
         print(f"| scaling efficiency (2 workers) | {100 * one['wall'] / two['wall'] / 2:.0f} % |")
         print(f"| speed-up 2 threads in 1 worker vs 1 | {one['wall'] / thr['wall']:.2f}× |")
         print(f"| 1-worker batch / estimate time | {one['wall'] / est_s:.2f} |")
-        print(f"| per-task overhead (1 worker, outside the task's own work) | {1e3 * overhead:.0f} ms |")
-        print(f"| chunk warm-up (overlap) work, share | {one['task_work'] / est_s - 1:+.0%} vs estimate |")
+        print(
+            f"| per-task overhead (1 worker, outside the task's work) | {1e3 * overhead:.0f} ms |"
+        )
+        extra = one["task_work"] / est_s - 1
+        print(f"| work inside the tasks vs estimate (overlap warm-up) | {extra:+.0%} |")
         print(f"| bare Dask task latency | {1e3 * one['latency']:.1f} ms |")
         print(f"| local cluster start-up (1 worker) | {one['startup']:.1f} s |")
         rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

@@ -1588,7 +1588,7 @@ mod tests {
         g.add_edges(&s, &d, &c, &c).unwrap();
         // Unary terms on every node (like a segmentation), one seed on each side.
         for i in 0..h * w {
-            let (a, b) = if (i / w + i % w) % 3 == 0 {
+            let (a, b) = if (i / w + i % w).is_multiple_of(3) {
                 (one, C::ZERO)
             } else {
                 (C::ZERO, one)
