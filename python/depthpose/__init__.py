@@ -21,7 +21,7 @@ from ._core import (
 )
 from .body import BodyModel
 from .cloud import PointCloud, foreground_mask, point_cloud
-from .fit import FitConfig, FitResult, fit_pose, pose_from_joints
+from .fit import FitConfig, FitResult, ShapeFitResult, fit_pose, fit_shape, pose_from_joints
 from .io import read_depth, read_image, write_depth
 from .pipeline import PipelineConfig, PoseEstimator, PoseResult, PoseTracker, estimate_stereo
 from .templates import Candidate, TemplateDatabase, surface_context
@@ -42,6 +42,8 @@ __all__ = [
     "FileFormatError",
     "FitConfig",
     "FitResult",
+    "ShapeFitResult",
+    "fit_shape",
     "InvalidInputError",
     "NoBodyError",
     "PointCloud",
