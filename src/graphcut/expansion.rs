@@ -489,6 +489,12 @@ pub struct CrfSolver<C: Cost> {
     /// Per-node move costs for "keep" (x = 0, source side) and "switch" (x = 1).
     e0: Vec<C>,
     e1: Vec<C>,
+    /// Per node: the most its edges can gain when it switches (see `expansion_move`).
+    slack: Vec<C>,
+    /// Per node: provably keeps its label in the optimal move, left out of the cut.
+    fixed: Vec<bool>,
+    /// Whether expansion moves leave provably fixed nodes out of the cut.
+    prune: bool,
     candidate: Vec<i32>,
 }
 
@@ -520,8 +526,19 @@ impl<C: Cost> CrfSolver<C> {
             edges: edges.to_vec(),
             e0: vec![C::ZERO; n_nodes],
             e1: vec![C::ZERO; n_nodes],
+            slack: vec![C::ZERO; n_nodes],
+            fixed: vec![false; n_nodes],
+            prune: true,
             candidate: vec![0; n_nodes],
         })
+    }
+
+    /// Turns on (the default) or off the exact pruning of expansion moves: a node whose
+    /// switch to α costs more unary than all its edges could ever give back keeps its
+    /// label in every optimal move, so it is left out of the cut. Off gives the plain
+    /// construction (same move energies; only ties may resolve differently).
+    pub fn set_pruning(&mut self, on: bool) {
+        self.prune = on;
     }
 
     fn check<'a>(&self, problem: &CrfProblem<'a, C>, metric: bool) -> Result<Checked<'a, C>> {
@@ -602,17 +619,58 @@ impl<C: Cost> CrfSolver<C> {
                 c.u_graph(i, a)
             };
         }
+        // Pruning (exact). Take any optimal move in which node i (label f_i ≠ α) switches
+        // to α and switch i back: its unary term drops by U_i(α) − U_i(f_i), and each
+        // edge term w·V(α, x_j) becomes w·V(f_i, x_j) ≤ w·V(f_i, α) + w·V(α, x_j)
+        // (triangle inequality), so the edges rise by at most slack_i = Σ_j w_ij·V(f_i, α).
+        // Where U_i(α) − U_i(f_i) > slack_i that would lower an optimal energy, so i keeps
+        // f_i in every optimal move and can be left out of the cut. On the EM's body
+        // parts this removes most nodes from most moves (points far from segment α).
+        if self.prune {
+            self.slack.fill(C::ZERO);
+            for (k, &[i, j]) in c.edges.iter().enumerate() {
+                let (i, j) = (i as usize, j as usize);
+                if i != j {
+                    self.slack[i] += c.pair(k, labels[i], alpha);
+                    self.slack[j] += c.pair(k, labels[j], alpha);
+                }
+            }
+            for i in 0..c.n {
+                self.fixed[i] = labels[i] != alpha && self.e1[i] - self.e0[i] > self.slack[i];
+            }
+        }
+        let prune = self.prune;
         for (k, &[i, j]) in c.edges.iter().enumerate() {
             let (i, j) = (i as usize, j as usize);
             let (fi, fj) = (labels[i], labels[j]);
             if i == j || fi == alpha && fj == alpha {
                 continue;
             }
+            let (xi, xj) = if prune {
+                (self.fixed[i], self.fixed[j])
+            } else {
+                (false, false)
+            };
+            if xi && xj {
+                continue; // a constant of this move
+            }
             if fi == alpha {
                 // x_j = 0 keeps (α, f_j); x_j = 1 gives (α, α) = 0.
-                self.e0[j] += c.pair(k, alpha, fj);
+                if !xj {
+                    self.e0[j] += c.pair(k, alpha, fj);
+                }
             } else if fj == alpha {
-                self.e0[i] += c.pair(k, fi, alpha);
+                if !xi {
+                    self.e0[i] += c.pair(k, fi, alpha);
+                }
+            } else if xi {
+                // x_i = 0 for sure: A = E(0,0) or B = E(0,1) by x_j.
+                self.e0[j] += c.pair(k, fi, fj);
+                self.e1[j] += c.pair(k, fi, alpha);
+            } else if xj {
+                // x_j = 0 for sure: A or C = E(1,0) by x_i.
+                self.e0[i] += c.pair(k, fi, fj);
+                self.e1[i] += c.pair(k, alpha, fj);
             } else {
                 let ea = c.pair(k, fi, fj);
                 let eb = c.pair(k, fi, alpha);
@@ -630,7 +688,7 @@ impl<C: Cost> CrfSolver<C> {
             }
         }
         for i in 0..c.n {
-            if labels[i] != alpha {
+            if labels[i] != alpha && !(prune && self.fixed[i]) {
                 let (x0, x1) = (self.e0[i], self.e1[i]);
                 let m = x0.min_of(x1);
                 // Source side (x = 0, keep) pays the sink arc and vice versa.
@@ -639,7 +697,8 @@ impl<C: Cost> CrfSolver<C> {
         }
         self.graph.maxflow();
         for i in 0..c.n {
-            self.candidate[i] = if labels[i] != alpha && self.graph.is_sink_side(i) {
+            let keep = labels[i] == alpha || prune && self.fixed[i];
+            self.candidate[i] = if !keep && self.graph.is_sink_side(i) {
                 alpha
             } else {
                 labels[i]
@@ -1053,6 +1112,51 @@ mod tests {
         assert!(
             matches!(energy(&pf, &[0, 0]), Err(Error::InvalidArgument { ref name, .. }) if name == "unary")
         );
+    }
+
+    /// The least energy over all expansion moves of `alpha` from `labels` (2^n subsets).
+    fn best_move(p: &CrfProblem<i64>, labels: &[i32], alpha: i32) -> i64 {
+        let n = labels.len();
+        (0u32..1 << n)
+            .map(|mask| {
+                let moved: Vec<i32> = (0..n)
+                    .map(|i| if mask >> i & 1 == 1 { alpha } else { labels[i] })
+                    .collect();
+                energy(p, &moved).unwrap()
+            })
+            .min()
+            .unwrap()
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        /// Each expansion move, pruned or not, reaches the optimal move energy; with
+        /// widely spread unaries most nodes are pruned, so this checks the pruning rule.
+        #[test]
+        fn pruned_and_plain_moves_are_optimal(
+            p in prob(7, 4),
+            scale in 1i64..6,
+            seed in 0u32..10_000,
+            metric in any::<bool>(),
+        ) {
+            let p = Prob { unary: p.unary.iter().map(|u| u * scale).collect(), ..p };
+            let tl = truncated_linear(p.l);
+            let v = p.view(if metric { Some(&tl) } else { None });
+            let n = p.unary.len() / p.l;
+            let labels: Vec<i32> = (0..n)
+                .map(|i| ((seed as usize / (i + 1) + i * 7) % p.l) as i32)
+                .collect();
+            let alpha = (seed as usize % p.l) as i32;
+            let c = check_problem(&v, true).unwrap();
+            let best = best_move(&v, &labels, alpha);
+            let mut s = CrfSolver::new(n, &p.edges).unwrap();
+            for prune in [true, false] {
+                s.set_pruning(prune);
+                let e = s.expansion_move(&c, &labels, alpha);
+                prop_assert_eq!(e.value(), best, "prune {}", prune);
+            }
+        }
     }
 
     #[test]
