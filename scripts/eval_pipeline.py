@@ -14,6 +14,12 @@ template search, and re-initialised / switched frames separately) and the peak r
     python scripts/eval_pipeline.py                       # everything
     python scripts/eval_pipeline.py --mode track --seq walk_left --frames 20
     python scripts/eval_pipeline.py --json-out figures.json
+    python scripts/eval_pipeline.py --mode track --height 1.60 --calibrate on
+
+Shape calibration (``PoseTracker``, tracked mode): ``--calibrate auto`` (the tracker's
+default: on unless a model is given), ``on`` or ``off``; ``--height H`` starts from
+``BodyModel(height=H)`` instead of the default model. The calibrating frame's time
+(``timings["calibration"]``) is reported separately, with the fitted shape factors.
 """
 
 from __future__ import annotations
@@ -48,7 +54,7 @@ def _load(path: Path, frames: int | None, start: int):
     return seq, depth, gt
 
 
-def _run(depth, seq, templates, config, *, track: bool, step: int):
+def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None):
     from depthpose.pipeline import estimate_frames
 
     sources: list[str] = []
@@ -56,7 +62,10 @@ def _run(depth, seq, templates, config, *, track: bool, step: int):
     def on_frame(_k, res):
         # "tracking+search": a tracked frame whose re-check / lost-track search kept it.
         kept = res.source == "tracking" and "search" in res.timings
-        sources.append("tracking+search" if kept else res.source)
+        if "calibration" in res.timings:
+            sources.append("calibration")
+        else:
+            sources.append("tracking+search" if kept else res.source)
 
     idx = np.arange(0, depth.shape[0], 1 if track else step)
     t0 = time.perf_counter()
@@ -68,6 +77,8 @@ def _run(depth, seq, templates, config, *, track: bool, step: int):
         templates=templates,
         config=config,
         on_frame=on_frame,
+        model=model,
+        calibrate=calibrate if track else None,
     )
     wall = time.perf_counter() - t0
     # Whole-call times (estimate_frames times each step, joint confidences included).
@@ -100,6 +111,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--per-joint", action="store_true", help="print the per-joint table")
     ap.add_argument("--per-frame", action="store_true", help="print per-frame MPJPE/source")
     ap.add_argument("--json-out", type=Path, default=None)
+    ap.add_argument(
+        "--height",
+        type=float,
+        default=None,
+        help="start from BodyModel(height=H) (default: the default model)",
+    )
+    ap.add_argument(
+        "--calibrate",
+        choices=["auto", "on", "off"],
+        default="auto",
+        help="tracker shape calibration (auto: on unless --height is given)",
+    )
     args = ap.parse_args(argv)
     if args.step < 1:
         ap.error("--step must be >= 1")
@@ -121,16 +144,21 @@ def main(argv: list[str] | None = None) -> int:
 
     preds: dict[str, list[np.ndarray]] = {m: [] for m in modes}
     gts: dict[str, list[np.ndarray]] = {m: [] for m in modes}
-    times: dict[str, list[float]] = {"update": [], "kept": [], "reinit": [], "estimate": []}
+    times: dict[str, list[float]] = {
+        "update": [], "kept": [], "reinit": [], "estimate": [], "calibration": []
+    }  # fmt: skip
+    model = None if args.height is None else dp.BodyModel(height=args.height)
+    calibrate = {"auto": None, "on": True, "off": False}[args.calibrate]
     rows = []
-    summary: dict = {"sequences": {}, "config": vars(config)}
+    summary: dict = {"sequences": {}, "config": vars(config), "height": args.height,
+                     "calibrate": args.calibrate}  # fmt: skip
     for f in files:
         seq, depth, gt = _load(f, args.frames, args.start)
         row = [f.stem, str(depth.shape[0])]
         summary["sequences"][f.stem] = {}
         for m in modes:
             idx, r, t, wall = _run(depth, seq, templates, config, track=m == "track",
-                                   step=args.step)  # fmt: skip
+                                   step=args.step, model=model, calibrate=calibrate)  # fmt: skip
             acc = evaluate(r.joints, gt[idx])
             preds[m].append(r.joints)
             gts[m].append(gt[idx])
@@ -138,11 +166,24 @@ def main(argv: list[str] | None = None) -> int:
                 times["update"] += t.get("tracking", [])
                 times["kept"] += t.get("tracking+search", [])
                 times["reinit"] += t.get("templates", [])
+                times["calibration"] += t.get("calibration", [])
             else:
                 times["estimate"] += t.get("templates", [])
             row += [f"{acc['mpjpe_mm']:.1f}", f"{acc['pck']:.3f}"]
             summary["sequences"][f.stem][m] = {**acc, "wall_s": wall,
                                                "reinit": len(t.get("templates", []))}  # fmt: skip
+            if m == "track":
+                sf = r.shape_factors
+                summary["sequences"][f.stem][m].update(
+                    shape_factors=None if sf is None else [float(v) for v in sf],
+                    calibration_frame=r.calibration_frame,
+                    calibration_error=r.calibration_error,
+                )
+                if sf is not None:
+                    print(f"{f.stem}: calibrated at frame {r.calibration_frame}, factors "
+                          + " ".join(f"{v:.3f}" for v in sf), flush=True)  # fmt: skip
+                elif r.calibration_error:
+                    print(f"{f.stem}: calibration failed: {r.calibration_error}", flush=True)
             if args.per_frame:
                 err = 1000 * np.linalg.norm(r.joints - gt[idx], axis=-1).mean(-1)
                 print(f"{f.stem} {m}: " + " ".join(f"{e:.0f}" for e in err), flush=True)
@@ -188,13 +229,14 @@ def main(argv: list[str] | None = None) -> int:
         ("update", "PoseTracker.update, tracked frame"),
         ("kept", "PoseTracker.update, tracked frame + search (kept)"),
         ("reinit", "PoseTracker.update, (re-)initialised frame"),
+        ("calibration", "PoseTracker.update, frame that ran the shape calibration"),
         ("estimate", "PoseEstimator.estimate (from scratch)"),
     ]:
         v = times[k]
         if v:
             trows.append([label, f"{np.median(v):.1f}", str(len(v))])
             summary[f"median_{k}_ms"] = float(np.median(v))
-    all_update = times["update"] + times["kept"] + times["reinit"]
+    all_update = times["update"] + times["kept"] + times["reinit"] + times["calibration"]
     if all_update:
         trows.append(["PoseTracker.update, all frames (mean)", f"{np.mean(all_update):.1f}",
                       str(len(all_update))])  # fmt: skip

@@ -273,7 +273,7 @@ class BodyModel:
         iterations: int = 3,
         config: FitConfig | None = None,
         lm_iterations: int = 20,
-        prior_weight: float = 1000.0,
+        prior_weight: float = 1e5,
         bounds: tuple[float, float] = (0.7, 1.4),
     ) -> ShapeFitResult: ...
 

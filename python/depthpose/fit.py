@@ -85,7 +85,7 @@ def fit_shape(
     iterations: int = 3,
     config: None | FitConfig | Mapping[str, Any] = None,
     lm_iterations: int = 20,
-    prior_weight: float = 1000.0,
+    prior_weight: float = 1e5,
     bounds: tuple[float, float] = (0.7, 1.4),
 ) -> ShapeFitResult:
     """Calibrate the body shape of `model` (default `BodyModel()`) on a few frames.

@@ -5,8 +5,10 @@ From scratch: foreground → surface-context template search → hard EM (CRF la
 Levenberg–Marquardt) from the best few candidates, keeping the lowest energy. Tracking:
 each frame starts from the previous pose extrapolated by a damped constant-velocity
 model, with a prior toward it; a lost track (too few points explained) is
-re-initialised from the templates. Subject shape calibration is not built yet: the body
-shape is the model's, scaled from its height.
+re-initialised from the templates. Subject shape calibration: unless told the shape
+(a ``model``), the tracker fits the body shape (``fit_shape``, 12 factors) once to its
+first frames and keeps it (see :class:`PoseTracker` and
+``docs/pipeline.md``). Stereo: :func:`estimate_stereo` (GCS disparity → depth → pose).
 
 Two people in view: the foreground stage keeps the nearest large body (see
 ``foreground_mask``), so the nearest person is estimated.
@@ -79,6 +81,52 @@ class PipelineConfig:
     switch_margin: float = 0.1
     #: Fitting settings passed to ``fit_pose`` as ``FitConfig`` keywords (None = defaults).
     fit: dict[str, Any] | None = None
+    #: Tracking: subject shape calibration (see :class:`PoseTracker`): the body shape is
+    #: fitted once (``fit_shape``) to this many usable frames and kept (0 = never).
+    #: Only when the tracker is not told the shape (no ``model``) or is asked to
+    #: (``calibrate=True``).
+    calibration_frames: int = 8
+    #: ... taking every this many usable frames (1 = consecutive; larger spreads the
+    #: frames over more of the motion but calibrates later: on the shared sequences
+    #: 2 was worse than 1, see docs/pipeline.md).
+    calibration_every: int = 1
+    #: ... with this weight of the prior toward the starting shape (``fit_shape``'s
+    #: ``prior_weight``).
+    calibration_prior_weight: float = 1e5
+    #: ... and at most this many rounds (``fit_shape``'s ``iterations``).
+    calibration_rounds: int = 3
+
+    def validate(self) -> None:
+        """Raises ``InvalidInputError`` naming the first nonsensical field."""
+
+        def count(name: str, low: int) -> None:
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
+                raise InvalidInputError(f"{name}: expected an integer >= {low}, got {v!r}")
+
+        def real(name: str, low: float, high: float = np.inf, *, inf: bool = False) -> None:
+            v = getattr(self, name)
+            ok = isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+            ok = ok and (bool(np.isfinite(v)) or (inf and v == np.inf)) and low <= v <= high
+            if not ok:
+                what = "number (or inf)" if inf else "finite number"
+                raise InvalidInputError(f"{name}: expected a {what} in [{low}, {high}], got {v!r}")
+
+        count("candidates", 1)
+        count("hypotheses", 0)
+        count("candidate_iterations", 1)
+        count("track_iterations", 1)
+        count("recheck_every", 0)
+        count("calibration_frames", 0)
+        count("calibration_every", 1)
+        count("calibration_rounds", 1)
+        real("prior_weight", 0.0)
+        real("velocity_damping", 0.0, 1.0)
+        real("min_inlier_share", 0.0, 1.0)
+        real("lost_ratio", 0.0, inf=True)
+        real("lost_discrepancy", 0.0, inf=True)
+        real("switch_margin", 0.0, 1.0)
+        real("calibration_prior_weight", 0.0)
 
 
 @dataclass
@@ -267,7 +315,12 @@ class PoseEstimator:
             )
         self.camera = camera
         self.model = _model(model)
+        if config is not None and not isinstance(config, PipelineConfig):
+            raise InvalidInputError(
+                f"config: expected a PipelineConfig, got {type(config).__name__}"
+            )
         self.config = config or PipelineConfig()
+        self.config.validate()
         self.background = background
         self._templates = templates
 
@@ -381,7 +434,34 @@ def _stage_times(t: dict[str, float]) -> dict[str, float]:
 
 
 class PoseTracker:
-    """Pose through a depth video: each :meth:`update` starts from the previous pose."""
+    """Pose through a depth video: each :meth:`update` starts from the previous pose.
+
+    **Subject shape calibration.** Unless told the shape, the tracker refines the body
+    shape over its first frames and keeps it: it collects every
+    ``config.calibration_every``-th *usable* frame until it has
+    ``config.calibration_frames`` of them, then runs :func:`~depthpose.fit_shape` once on
+    their depth, masks and poses (prior weight ``config.calibration_prior_weight``),
+    which refits every frame's pose and labels with the shape, and tracks with the
+    calibrated model from the next frame on (continuing from the calibrated pose of the
+    frame). Usable: any frame but a track's first (the template search alone) whose
+    result explains at least ``min_inlier_share`` of the foreground points, whether
+    tracked, kept after a search or switched. Not only the frames that passed the
+    lost-track test: with a wrong shape the depth discrepancy exceeds the absolute
+    threshold on most frames, so waiting for those left half the shared sequences
+    uncalibrated (docs/pipeline.md). The frame that completes the collection takes the
+    calibration's time (``timings["calibration"]``; about 1.5–3 s for 8 frames on an
+    idle 2-core machine).
+
+    ``calibrate``: None (default) calibrates when no ``model`` is given (the shape is
+    unknown) and ``config.calibration_frames > 0``; a given ``model`` is taken as the
+    subject's known shape and kept. ``True`` calibrates a given model too (e.g. one
+    scaled from a known height); ``False`` never calibrates.
+
+    A calibration that fails (``DepthPoseError`` from ``fit_shape``) leaves the model
+    as it was; the error is in :attr:`calibration_error` and it is not retried.
+    :meth:`reset` forgets the track but keeps the calibrated shape (the same subject);
+    ``reset(shape=True)`` also restores the starting model and calibrates again.
+    """
 
     def __init__(
         self,
@@ -391,11 +471,19 @@ class PoseTracker:
         templates=None,
         config: PipelineConfig | None = None,
         background: np.ndarray | None = None,
+        calibrate: bool | None = None,
     ) -> None:
+        if calibrate is not None and not isinstance(calibrate, (bool, np.bool_)):
+            raise InvalidInputError(
+                f"calibrate: expected True, False or None, got {type(calibrate).__name__}"
+            )
         self.estimator = PoseEstimator(
             camera, model=model, templates=templates, config=config, background=background
         )
-        self.reset()
+        #: The model the tracker started with (calibration starts from it).
+        self.base_model = self.estimator.model
+        self._calibrate = (model is None) if calibrate is None else bool(calibrate)
+        self.reset(shape=True)
 
     @property
     def model(self):
@@ -405,14 +493,44 @@ class PoseTracker:
     def config(self) -> PipelineConfig:
         return self.estimator.config
 
-    def reset(self) -> None:
-        """Forget the track."""
+    @property
+    def calibrating(self) -> bool:
+        """Whether the tracker is still collecting frames to calibrate the shape."""
+        return (
+            self._calibrate
+            and self.config.calibration_frames > 0
+            and not self.calibrated
+            and self.calibration_error is None
+        )
+
+    def reset(self, shape: bool = False) -> None:
+        """Forget the track. The calibrated shape is kept (the same subject) unless
+        ``shape`` is true: then the starting model is restored and, if calibration is
+        on, the shape is calibrated again over the next frames."""
         self._prev: np.ndarray | None = None
         self._prev2: np.ndarray | None = None
         self._recent: list[float] = []
         self._since_check = 0
         self.lost_frames = 0
         self.switches = 0
+        if shape:
+            # Frames kept for the calibration survive a plain reset (the subject is the
+            # same).
+            self._calib_buffer: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+            self._calib_seen = 0
+            self.estimator.model = self.base_model
+            #: Whether the model was calibrated (``model`` is then the calibrated one).
+            self.calibrated = False
+            #: Shape factors (12,) of the calibrated model relative to
+            #: :attr:`base_model` (``BodyModel.shape_factor_names`` order); None before.
+            self.shape_factors: np.ndarray | None = None
+            #: The ``fit_shape`` result of the calibration (None before).
+            self.calibration = None
+            #: Why the calibration failed (the ``DepthPoseError`` message), else None.
+            self.calibration_error: str | None = None
+            #: Frames :meth:`update` had been given when the calibration ran.
+            self.calibration_frame: int | None = None
+            self._frames = 0
 
     def start_from(self, pose: np.ndarray) -> None:
         """Starts the track from a known pose (the next :meth:`update` refines it
@@ -442,11 +560,55 @@ class PoseTracker:
         lo, hi = np.asarray(self.model.lower_bounds), np.asarray(self.model.upper_bounds)
         return np.clip(pred, lo, hi)
 
+    def _collect(self, depth: np.ndarray, mask: np.ndarray, res: PoseResult) -> None:
+        """Keeps a usable frame for the calibration; runs it when there are enough."""
+        cfg = self.config
+        self._calib_seen += 1
+        if (self._calib_seen - 1) % cfg.calibration_every:
+            return
+        # uint16 frames are millimetres; keep metres so that frames of either kind stack.
+        metres = depth / 1000.0 if depth.dtype == np.uint16 else depth
+        self._calib_buffer.append((np.array(metres, np.float32), mask.copy(), res.pose.copy()))
+        if len(self._calib_buffer) < cfg.calibration_frames:
+            return
+        from . import fit as _fit
+
+        t0 = time.perf_counter()
+        depths, masks, poses = (np.stack(v) for v in zip(*self._calib_buffer, strict=True))
+        self._calib_buffer = []
+        self.calibration_frame = self._frames
+        try:
+            r = _fit.fit_shape(
+                depths,
+                self.estimator.camera,
+                poses,
+                model=self.base_model,
+                masks=masks,
+                iterations=cfg.calibration_rounds,
+                config=cfg.fit,
+                prior_weight=cfg.calibration_prior_weight,
+            )
+        except DepthPoseError as e:
+            self.calibration_error = f"{type(e).__name__}: {e}"
+        else:
+            self.estimator.model = r.model
+            self.calibrated = True
+            self.calibration = r
+            self.shape_factors = np.asarray(r.factors, np.float64).copy()
+            # Continue from this frame's pose under the calibrated shape; the velocity
+            # and the discrepancy history belong to the old shape.
+            self._prev = np.asarray(r.poses[-1], np.float64).copy()
+            self._prev2 = None
+            self._recent = []
+        res.timings["calibration"] = 1000 * (time.perf_counter() - t0)
+        res.timings["total"] += res.timings["calibration"]
+
     def update(self, depth: np.ndarray, mask: np.ndarray | None = None) -> PoseResult:
         """The pose of the next frame. A lost track is re-initialised from the
         templates; every ``recheck_every`` frames the template hypotheses and the
         swapped-limbs pose of the track compete with the tracked pose, and the track
-        switches when one explains the depth clearly better."""
+        switches when one explains the depth clearly better. While calibrating, a
+        usable frame may be kept for (and complete) the shape calibration."""
         est = self.estimator
         cfg = self.config
         switched = False
@@ -483,6 +645,8 @@ class PoseTracker:
                 if lost:
                     self.lost_frames += 1
             mask = m
+        self._frames += 1
+        first = self._prev is None
         if switched:
             self.switches += self._prev is not None
             self._prev2 = None
@@ -492,6 +656,10 @@ class PoseTracker:
         self._prev = res.pose.copy()
         if np.isfinite(res.discrepancy):
             self._recent = [*self._recent[-14:], res.discrepancy]
+        if self.calibrating and not first:
+            n = int(np.asarray(mask).sum())
+            if int((res.labels >= 0).sum()) >= cfg.min_inlier_share * max(n, 1):
+                self._collect(np.asarray(depth), np.asarray(mask, bool), res)
         return res
 
 
@@ -504,6 +672,13 @@ class FramesResult:
     confidence: np.ndarray  # (T, 15)
     errors: list[dict[str, Any]]  # {"frame": index, "error": message}
     seconds: list[float] = field(default_factory=list)
+    #: Tracked: the calibrated shape factors (see :class:`PoseTracker`), else None.
+    shape_factors: np.ndarray | None = None
+    #: Tracked: why the shape calibration failed, else None.
+    calibration_error: str | None = None
+    #: Tracked: the frame (index in ``frames`` + ``first_frame``) whose update ran the
+    #: calibration (attempted), else None.
+    calibration_frame: int | None = None
 
 
 def estimate_frames(
@@ -518,9 +693,13 @@ def estimate_frames(
     warmup: int = 0,
     first_frame: int = 0,
     on_frame=None,
+    calibrate: bool | None = None,
 ) -> FramesResult:
     """Poses of frames (T, H, W); the first ``warmup`` frames only prime the tracker and
-    are not returned. A frame that raises is recorded as NaN and the loop goes on."""
+    are not returned. A frame that raises is recorded as NaN and the loop goes on.
+    ``calibrate``: the tracker's shape calibration (see :class:`PoseTracker`); the
+    tracker's calibration outcome is in ``FramesResult.shape_factors`` /
+    ``calibration_error``."""
     frames = np.asarray(frames)
     if frames.ndim != 3:
         raise InvalidInputError(f"frames: expected (T, H, W), got shape {frames.shape}")
@@ -530,7 +709,7 @@ def estimate_frames(
     out = FramesResult(np.full((n, 15, 3), np.nan), np.full((n, 22), np.nan), np.zeros((n, 15)), [])
     if track:
         tracker = PoseTracker(camera, model=model, templates=templates, config=config,
-                              background=background)  # fmt: skip
+                              background=background, calibrate=calibrate)  # fmt: skip
         step = tracker.update
     else:
         estimator = PoseEstimator(camera, model=model, templates=templates, config=config,
@@ -546,6 +725,8 @@ def estimate_frames(
             if k >= warmup:
                 out.errors.append({"frame": first_frame + k, "error": f"{type(e).__name__}: {e}"})
             continue
+        if track and out.calibration_frame is None and tracker.calibration_frame is not None:
+            out.calibration_frame = first_frame + k
         if k >= warmup:
             out.joints[k - warmup] = res.joints
             out.pose[k - warmup] = res.pose
@@ -553,6 +734,9 @@ def estimate_frames(
             out.seconds.append(time.perf_counter() - t0)
             if on_frame is not None:
                 on_frame(first_frame + k, res)
+    if track:
+        out.shape_factors = tracker.shape_factors
+        out.calibration_error = tracker.calibration_error
     return out
 
 
@@ -565,15 +749,50 @@ def estimate_stereo(
     doffs: float = 0.0,
     estimator: PoseEstimator | None = None,
     max_disparity: int | None = None,
+    background: np.ndarray | None = None,
+    mask: np.ndarray | None = None,
 ) -> PoseResult:
     """The paper's real-data path: a rectified pair → GCS disparity → depth → pose.
 
     ``camera`` is the left camera (its fx is the focal length in pixels); ``baseline`` in
     metres; ``doffs`` the principal-point offset between the cameras (Middlebury style).
+    The person is found like in a depth image (:func:`~depthpose.foreground_mask`):
+    ``background`` is the empty scene's depth (H, W) in metres, e.g. the depth of a pair
+    taken without the person (``stereo.depth_from_disparity(stereo.match(...))``), and
+    what lies clearly in front of it is the person; ``mask`` gives the person's pixels
+    directly. Without either, the estimator's own background (``estimator``'s) or the
+    nearest large body in range is used. The result's ``timings`` include ``stereo``
+    (matching and depth, ms).
     """
     from . import stereo
 
+    if not isinstance(camera, Camera):
+        raise InvalidInputError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
+    number = isinstance(baseline, (int, float, np.integer, np.floating))
+    if isinstance(baseline, bool) or not number:
+        raise InvalidInputError(f"baseline: expected a number of metres, got {baseline!r}")
+    if not (np.isfinite(baseline) and baseline > 0):
+        raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
+    if mask is not None and background is not None:
+        raise InvalidInputError("mask: give either mask or background, not both")
+    t0 = time.perf_counter()
     disparity = stereo.match(left, right, max_disparity=max_disparity)
-    depth = stereo.depth_from_disparity(disparity, camera.fx, baseline, doffs)
+    depth = stereo.depth_from_disparity(disparity, camera.fx, float(baseline), doffs)
+    depth = np.ascontiguousarray(depth, np.float32)
+    if depth.shape != camera.shape:
+        raise InvalidInputError(
+            f"left: image is {depth.shape[1]}x{depth.shape[0]}, camera is "
+            f"{camera.width}x{camera.height}"
+        )
+    t_stereo = 1000 * (time.perf_counter() - t0)
     est = estimator or PoseEstimator(camera)
-    return est.estimate(np.ascontiguousarray(depth, np.float32))
+    if background is not None:
+        mask = foreground_mask(depth, np.ascontiguousarray(background, np.float32))
+    elif mask is not None:
+        mask = np.asarray(mask)
+        if mask.shape != depth.shape:
+            raise InvalidInputError(f"mask: expected shape {depth.shape}, got {mask.shape}")
+    res = est.estimate(depth, mask)
+    res.timings = {"stereo": t_stereo, **res.timings}
+    res.timings["total"] = res.timings.get("total", 0.0) + t_stereo
+    return res

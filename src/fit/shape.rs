@@ -80,6 +80,8 @@ pub struct ShapeConfig {
     pub upper: f64,
     /// Weight w of the prior ½·w·Σ(s − 1)² (≥ 0): keeps factors the data hardly
     /// constrain (e.g. the depth of the torso seen from the front) near the base shape.
+    /// Default 1e5: on the shared synthetic sequences (a mesh body, not ellipsoids) a
+    /// weaker prior (1e3) trades joint accuracy for surface fit (docs/fit.md).
     pub prior_weight: f64,
     /// Stop when a round lowers the energy by less than this fraction.
     pub tolerance: f64,
@@ -93,7 +95,7 @@ impl Default for ShapeConfig {
             lm_iterations: 20,
             lower: 0.7,
             upper: 1.4,
-            prior_weight: 1000.0,
+            prior_weight: 1e5,
             tolerance: 1e-4,
         }
     }
@@ -1002,7 +1004,13 @@ mod tests {
             .enumerate()
             .map(|(i, p)| perturbed(p, 21 + i as u64, 0.05, 0.03))
             .collect();
-        let r = fit_shape(&frames, &cam, &base, &init, &ShapeConfig::default()).unwrap();
+        // The data are the model's own ellipsoids: a weak prior (the default is tuned
+        // for real bodies, whose surfaces the ellipsoids only approximate).
+        let config = ShapeConfig {
+            prior_weight: 1e3,
+            ..ShapeConfig::default()
+        };
+        let r = fit_shape(&frames, &cam, &base, &init, &config).unwrap();
         assert!(
             r.energy_trace.windows(2).all(|w| w[1] <= w[0]),
             "{:?}",
@@ -1036,7 +1044,7 @@ mod tests {
         }
         assert!(e_fit < 0.5 * e_base, "base {e_base} vs fitted {e_fit}");
         // Deterministic.
-        let r2 = fit_shape(&frames, &cam, &base, &init, &ShapeConfig::default()).unwrap();
+        let r2 = fit_shape(&frames, &cam, &base, &init, &config).unwrap();
         assert_eq!(r.factors, r2.factors);
     }
 

@@ -386,7 +386,7 @@ impl PyBodyModel {
     /// joint Levenberg-Marquardt over the shape factors and all poses for `iterations`
     /// rounds at most. Returns a `ShapeFitResult` (`model`, `factors`, `poses`, ...).
     #[pyo3(signature = (depths, camera, poses, *, masks=None, iterations=3, config=None,
-        lm_iterations=20, prior_weight=1000.0, bounds=(0.7, 1.4)))]
+        lm_iterations=20, prior_weight=1e5, bounds=(0.7, 1.4)))]
     #[allow(clippy::too_many_arguments)]
     fn fit_shape(
         &self,
