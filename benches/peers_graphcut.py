@@ -196,15 +196,22 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reps", type=int, default=5)
     args = ap.parse_args()
-    rows: list = []
+    print(f"{'case':32} {'ours ms':>9} {'peer ms':>9} {'ratio':>6}  notes", flush=True)
+    rows = _PrintingRows()
     for name, fn in [("PyMaxflow", bench_maxflow), ("gco-wrapper", bench_expansion)]:
         try:
             fn(rows, args.reps)
         except ImportError as e:
             print(f"{name} not available: {e}")
-    print(f"{'case':32} {'ours ms':>9} {'peer ms':>9} {'ratio':>6}  notes")
-    for name, t_o, t_p, note in rows:
-        print(f"{name:32} {t_o * 1e3:9.2f} {t_p * 1e3:9.2f} {t_o / t_p:6.2f}  {note}")
+
+
+class _PrintingRows(list):
+    """Prints each result row as soon as it is measured (the whole run takes minutes)."""
+
+    def append(self, row) -> None:
+        super().append(row)
+        name, t_o, t_p, note = row
+        print(f"{name:32} {t_o * 1e3:9.2f} {t_p * 1e3:9.2f} {t_o / t_p:6.2f}  {note}", flush=True)
 
 
 if __name__ == "__main__":

@@ -336,6 +336,8 @@ pub struct Graph<C: Capacity> {
     terminal_caps: Option<Vec<[C; 2]>>,
     flow: C,
     time: u32,
+    /// The clock restarts after this many ticks (`MAX_TIME` outside tests).
+    max_time: u32,
     active: ActiveQueue,
     orphans: VecDeque<u32>,
     /// True once `maxflow` ran and the trees describe the residual graph.
@@ -396,6 +398,7 @@ impl<C: Capacity> Graph<C> {
             terminal_caps: None,
             flow: C::ZERO,
             time: 0,
+            max_time: MAX_TIME,
             active: ActiveQueue::new(n_nodes),
             orphans: VecDeque::new(),
             trees_valid: false,
@@ -898,17 +901,35 @@ impl<C: Capacity> Graph<C> {
         self.orphans.push_back(i);
     }
 
-    /// Advances the clock of the adoption heuristic; restarts it (clearing every
-    /// node's stamp) when the 16 bits run out.
+    /// Advances the clock of the adoption heuristic; restarts it when the 16 bits run
+    /// out (every `max_time` ticks).
+    ///
+    /// Why the restart sets every distance to the same value: the shortcut in `grow`
+    /// (re-hang `j` below `i` when `ts_j <= ts_i && dist_j > dist_i`) cannot close a cycle
+    /// only while the key (ts, −dist) never decreases from a child to its parent. Keeping
+    /// the old distances with the stamps cleared breaks that (a child stamped earlier may
+    /// hold a smaller distance than its parent) and the trees can grow a cycle: on a
+    /// 640×480 segmentation the solver then looped for ever. Distance 1 for the roots
+    /// and one large constant for all other nodes keeps the order non-decreasing (and
+    /// the roots out of reach of the shortcut); fresh stamps rebuild it.
     #[inline]
     fn tick(&mut self) {
         self.time += 1;
-        if self.time > MAX_TIME {
+        if self.time > self.max_time {
             for v in &mut self.nodes {
-                v.tsd &= 0xFFFF;
+                // Roots keep distance 1, the least: a root must never be re-hung.
+                let root = v.parent & !SINK_BIT == TERMINAL;
+                v.tsd = pack_tsd(0, if root { 1 } else { 0xFFFF });
             }
             self.time = 1;
         }
+    }
+
+    /// Makes the adoption clock restart every `max_time` ticks instead of 65,535, so
+    /// tests can exercise the restart on small graphs.
+    #[cfg(test)]
+    fn set_max_time(&mut self, max_time: u32) {
+        self.max_time = max_time.clamp(1, MAX_TIME);
     }
 
     fn init_fresh(&mut self) {
@@ -1174,6 +1195,37 @@ impl<C: Capacity> Graph<C> {
             x = head(pb);
         }
         self.flow += f;
+    }
+
+    /// Asserts that every tree node's parent path reaches its tree's terminal without
+    /// a cycle, an orphan or a free node on the way (tests only).
+    #[cfg(test)]
+    fn check_trees(&self) {
+        for s in 0..self.n {
+            let mut k = s;
+            let mut steps = 0;
+            loop {
+                let p = self.nodes[k].parent;
+                if p == FREE {
+                    assert_eq!(k, s, "path from {s} reaches free node {k}");
+                    break;
+                }
+                let pb = p & !SINK_BIT;
+                assert!(pb != ORPHAN, "orphan {k} after adoption");
+                if pb == TERMINAL {
+                    break;
+                }
+                let q = (self.heads[pb as usize] & HEAD_MASK) as usize;
+                assert_eq!(
+                    self.nodes[q].parent & SINK_BIT,
+                    p & SINK_BIT,
+                    "tree mismatch"
+                );
+                k = q;
+                steps += 1;
+                assert!(steps <= self.n, "cycle through {s} (time {})", self.time);
+            }
+        }
     }
 
     fn adopt(&mut self) {
@@ -1461,6 +1513,68 @@ mod tests {
             }
             prop_assert_eq!(gi.maxflow() as f64, gf.maxflow());
             prop_assert_eq!(cut_value(&p, &gf.segments()), gi.flow());
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(300))]
+
+        /// The adoption clock restarting after every 1–3 augmentations (instead of
+        /// 65,535) must leave the trees acyclic and the flow exact; before the restart was
+        /// fixed, parent cycles made the solver loop for ever.
+        #[test]
+        fn clock_restarts_keep_maxflow_exact(
+            p in problem(9),
+            max_time in 1u32..4,
+            changes in prop::collection::vec((0usize..9, 0i64..12, 0i64..12), 1..4),
+        ) {
+            let mut g = graph_of(&p);
+            g.set_max_time(max_time);
+            prop_assert_eq!(g.maxflow(), brute_min_cut(&p));
+            check_flow(&p, &g, true);
+            g.check_trees();
+            let mut q = p.clone();
+            for &(i, s, t) in &changes {
+                let i = i % p.n;
+                q.terms[i] = (s, t);
+                g.set_tweights(i, s, t).unwrap();
+            }
+            prop_assert_eq!(g.maxflow(), brute_min_cut(&q));
+            prop_assert_eq!(cut_value(&q, &g.segments()), g.flow());
+            g.check_trees();
+        }
+    }
+
+    /// A grid large enough for thousands of augmentations, solved with the clock
+    /// restarting every few of them and without restarts: same flow, same cut value.
+    #[test]
+    fn clock_restarts_on_a_grid() {
+        let (h, w) = (48usize, 64usize);
+        let mut rng = 0x9E37_79B9_7F4A_7C15u64;
+        let mut next = move |m: i64| {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng % m as u64) as i64
+        };
+        let edges = grid_edges(h, w, 8).unwrap();
+        let p = Problem {
+            n: h * w,
+            edges: edges
+                .iter()
+                .map(|&[i, j]| (i as usize, j as usize, next(20), next(20)))
+                .collect(),
+            terms: (0..h * w).map(|_| (next(30), next(30))).collect(),
+        };
+        let mut plain = graph_of(&p);
+        let f = plain.maxflow();
+        for max_time in [1, 2, 5, 97] {
+            let mut g = graph_of(&p);
+            g.set_max_time(max_time);
+            assert_eq!(g.maxflow(), f, "max_time {max_time}");
+            g.check_trees();
+            assert_eq!(cut_value(&p, &g.segments()), f);
+            check_flow(&p, &g, true);
         }
     }
 
