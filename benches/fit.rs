@@ -6,6 +6,7 @@ use depthpose::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
 use depthpose::fit::em::{hard_em, unary_costs, EmConfig, NUM_LABELS};
 use depthpose::fit::lm::{PoseObjective, N, NN};
 use depthpose::fit::objective::{Loss, PointCost, PointObjective};
+use depthpose::fit::{fit_pose, FitConfig};
 use depthpose::graphcut::{CrfProblem, CrfSolver, MoveConfig};
 use depthpose::Camera;
 use std::hint::black_box;
@@ -45,6 +46,23 @@ fn bench(c: &mut Criterion) {
     g.bench_function("em_frame_320x240", |b| {
         b.iter(|| hard_em(&model, &cloud.points, &graph, black_box(&init), None, &cfg).unwrap())
     });
+    // A tracked frame: fit_pose with 4 EM iterations, on every pixel and on every
+    // second pixel of every second row (plus the full-resolution labelling).
+    for stride in [1, 2] {
+        let fit_cfg = FitConfig {
+            em: EmConfig {
+                max_iterations: 4,
+                ..EmConfig::default()
+            },
+            stride,
+            ..FitConfig::default()
+        };
+        g.bench_function(format!("fit_pose_track_4it_stride{stride}"), |b| {
+            b.iter(|| {
+                fit_pose(&depth, &cam, black_box(&init), &model, None, None, &fit_cfg).unwrap()
+            })
+        });
+    }
     // Parts of one EM iteration.
     let mut unary = vec![0.0; cloud.len() * NUM_LABELS];
     g.bench_function("unary_costs", |b| {

@@ -295,6 +295,7 @@ class FitConfig:
     expansion_cycles: int
     lm_max_iterations: int
     connectivity: int
+    stride: int
     def __init__(
         self,
         *,
@@ -314,6 +315,7 @@ class FitConfig:
         expansion_cycles: int | None = None,
         lm_max_iterations: int | None = None,
         connectivity: int = 4,
+        stride: int = 1,
     ) -> None: ...
 
 class FitResult:

@@ -58,10 +58,17 @@ class PipelineConfig:
     hypotheses: int = 4
     #: EM iterations for each candidate before choosing, and for the winner after.
     candidate_iterations: int = 3
+    #: Pixel stride (``FitConfig``'s ``stride``) of those brief candidate fits; the
+    #: winner's full refinement always uses every pixel.
+    candidate_stride: int = 2
     #: Tracking: weight of the prior toward the predicted pose (see ``fit_pose``).
     prior_weight: float = 100.0
     #: Tracking: EM iterations per tracked frame.
     track_iterations: int = 4
+    #: Tracking: EM of a tracked frame runs on every ``track_stride``-th pixel of every
+    #: ``track_stride``-th row, then labels the full resolution once (``FitConfig``'s
+    #: ``stride``; 1 = every pixel). See docs/pipeline.md for speed and accuracy.
+    track_stride: int = 2
     #: Tracking: share of the previous velocity carried into the prediction.
     velocity_damping: float = 0.5
     #: Tracking: a frame is lost when fewer than this share of the foreground points
@@ -116,6 +123,10 @@ class PipelineConfig:
         count("hypotheses", 0)
         count("candidate_iterations", 1)
         count("track_iterations", 1)
+        for name in ("track_stride", "candidate_stride"):
+            count(name, 1)
+            if getattr(self, name) > 8:
+                raise InvalidInputError(f"{name}: expected 1..8, got {getattr(self, name)!r}")
         count("recheck_every", 0)
         count("calibration_frames", 0)
         count("calibration_every", 1)
@@ -337,12 +348,14 @@ class PoseEstimator:
             return np.ascontiguousarray(mask, dtype=bool)
         return foreground_mask(depth, self.background)
 
-    def _fit(self, depth, mask, init, *, iterations=None, prior=None):
+    def _fit(self, depth, mask, init, *, iterations=None, prior=None, stride=None):
         from .fit import FitConfig, fit_pose
 
         kwargs = dict(self.config.fit or {})
         if iterations is not None:
             kwargs["max_iterations"] = iterations
+        if stride is not None:
+            kwargs["stride"] = stride
         return fit_pose(
             depth,
             self.camera,
@@ -404,7 +417,14 @@ class PoseEstimator:
         ranked = sorted(starts, key=lambda q: self.discrepancy(q, depth, mask))
         chosen = [*list(extra), *ranked[: max(1, self.config.hypotheses)]]
         fits = [
-            self._fit(depth, mask, q, iterations=self.config.candidate_iterations) for q in chosen
+            self._fit(
+                depth,
+                mask,
+                q,
+                iterations=self.config.candidate_iterations,
+                stride=self.config.candidate_stride,
+            )
+            for q in chosen
         ]
         scores = [self.discrepancy(f.pose, depth, mask) for f in fits]
         k = int(np.argmin(scores))
@@ -620,7 +640,14 @@ class PoseTracker:
             m = est._mask(depth, mask)
             t["foreground"] = time.perf_counter()
             pred = self._predict()
-            fit = est._fit(depth, m, pred, iterations=cfg.track_iterations, prior=pred)
+            fit = est._fit(
+                depth,
+                m,
+                pred,
+                iterations=cfg.track_iterations,
+                prior=pred,
+                stride=cfg.track_stride,
+            )
             score = est.discrepancy(fit.pose, depth, m)
             t["fit"] = time.perf_counter()
             lost = self._lost(fit, m, score)

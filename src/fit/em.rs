@@ -314,6 +314,46 @@ pub fn crf_energy(unary: &[f64], edges: &[[u32; 2]], weights: &[f64], labels: &[
     u + p
 }
 
+/// One E-step on its own: the CRF labels of `points` for a fixed `pose` at outlier
+/// distance `tau`, by alpha-expansion from `init` (labels in `0..NUM_LABELS`, the outlier
+/// label being [`NUM_SEGMENTS`]). Returns the labels (outlier as −1) and the CRF energy.
+/// Used to label the full-resolution cloud after EM ran on a sub-sampled one.
+pub fn label_points(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    graph: &PixelGraph,
+    pose: &Pose,
+    init: &[i32],
+    tau: f64,
+    config: &EmConfig,
+) -> Result<(Vec<i32>, f64)> {
+    config.validate()?;
+    let n = points.len();
+    if init.len() != n {
+        return Err(Error::invalid(
+            "init",
+            format!("has {} labels for {n} points", init.len()),
+        ));
+    }
+    let mut weights = Vec::with_capacity(graph.len());
+    edge_weights(graph, config, &mut weights);
+    let mut unary = vec![0.0; n * NUM_LABELS];
+    unary_costs(model, points, pose, config, tau, &mut unary);
+    let mut solver = CrfSolver::<f64>::new(n, &graph.edges)?;
+    let moves = MoveConfig {
+        max_cycles: config.expansion_cycles,
+    };
+    let lab =
+        solver.alpha_expansion(&problem(&unary, &graph.edges, &weights), Some(init), &moves)?;
+    let energy = crf_energy(&unary, &graph.edges, &weights, &lab.labels);
+    let labels = lab
+        .labels
+        .into_iter()
+        .map(|l| if l == OUTLIER { -1 } else { l })
+        .collect();
+    Ok((labels, energy))
+}
+
 /// Runs hard EM on `points` (with their neighbourhood `graph`) from `init`. `prior`, if
 /// given, adds ½Σ w(θ − θ_prior)² to the M-step (and to the energy).
 pub fn hard_em(

@@ -17,7 +17,7 @@ use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
 use crate::error::{Error, Result};
 use nalgebra::Vector3;
 
-pub use em::{hard_em, EmConfig, EmResult, EmTermination};
+pub use em::{hard_em, label_points, EmConfig, EmResult, EmTermination, OUTLIER};
 pub use ik::pose_from_joints;
 pub use lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, Termination};
 pub use objective::Loss;
@@ -32,15 +32,69 @@ pub struct FitConfig {
     pub em: EmConfig,
     /// Pixel neighbourhood of the CRF.
     pub connectivity: Connectivity,
+    /// EM runs on every `stride`-th pixel of every `stride`-th row (1 = all pixels;
+    /// 2 = a quarter of the points, about 3× faster), then the full-resolution pixels
+    /// are labelled once for the final pose. See [`fit_pose`].
+    pub stride: usize,
 }
+
+/// Largest accepted [`FitConfig::stride`].
+pub const MAX_STRIDE: usize = 8;
 
 impl Default for FitConfig {
     fn default() -> Self {
         FitConfig {
             em: EmConfig::default(),
             connectivity: Connectivity::Four,
+            stride: 1,
         }
     }
+}
+
+impl FitConfig {
+    /// Checks every field, naming the bad one.
+    pub fn validate(&self) -> Result<()> {
+        self.em.validate()?;
+        if self.stride == 0 || self.stride > MAX_STRIDE {
+            return Err(Error::invalid(
+                "stride",
+                format!("must be 1..={MAX_STRIDE}, got {}", self.stride),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Every `s`-th pixel of every `s`-th row of `depth` (and `mask`), and the camera of that
+/// sub-image: pixel (r, c) of it is pixel (s·r, s·c) of the original, so with pixel
+/// centres at integer coordinates the intrinsics simply scale by 1/s.
+fn subsample(
+    depth: &[f32],
+    camera: &Camera,
+    mask: Option<&[bool]>,
+    s: usize,
+) -> Result<(Vec<f32>, Option<Vec<bool>>, Camera)> {
+    let (w, h) = (camera.width, camera.height);
+    let (sw, sh) = (w.div_ceil(s), h.div_ceil(s));
+    let pick = |r: usize, c: usize| (s * r) * w + s * c;
+    let sub_depth = (0..sh)
+        .flat_map(|r| (0..sw).map(move |c| depth[pick(r, c)]))
+        .collect();
+    let sub_mask = mask.map(|m| {
+        (0..sh)
+            .flat_map(|r| (0..sw).map(move |c| m[pick(r, c)]))
+            .collect()
+    });
+    let sf = s as f64;
+    let cam = Camera {
+        fx: camera.fx / sf,
+        fy: camera.fy / sf,
+        cx: camera.cx / sf,
+        cy: camera.cy / sf,
+        width: sw,
+        height: sh,
+    };
+    Ok((sub_depth, sub_mask, cam))
 }
 
 /// Outcome of [`fit_pose`].
@@ -80,7 +134,7 @@ pub fn fit_pose(
     config: &FitConfig,
 ) -> Result<FitResult> {
     let init = pose_from_slice(init_pose, "init_pose")?;
-    config.em.validate()?;
+    config.validate()?;
     let view = DepthView::new(depth, camera.height, camera.width, "depth")?;
     let cloud = Cloud::from_depth(&view, camera, mask)?;
     if cloud.len() < MIN_POINTS {
@@ -90,21 +144,99 @@ pub fn fit_pose(
         )));
     }
     let graph = neighbour_graph(&cloud, config.connectivity);
-    let em = hard_em(model, &cloud.points, &graph, &init, prior, &config.em)?;
+    let s = config.stride;
+    let sub = if s > 1 {
+        let (sub_depth, sub_mask, sub_cam) = subsample(depth, camera, mask, s)?;
+        let sub_view = DepthView::new(&sub_depth, sub_cam.height, sub_cam.width, "depth")?;
+        let sub_cloud = Cloud::from_depth(&sub_view, &sub_cam, sub_mask.as_deref())?;
+        (sub_cloud.len() >= MIN_POINTS).then_some((sub_cloud, sub_cam))
+    } else {
+        None
+    };
+    let Some((sub_cloud, sub_cam)) = sub else {
+        let em = hard_em(model, &cloud.points, &graph, &init, prior, &config.em)?;
+        let mut labels = vec![-1i16; depth.len()];
+        for (&px, &l) in cloud.pixels.iter().zip(&em.labels) {
+            labels[px as usize] = l as i16;
+        }
+        return Ok(FitResult {
+            pose: em.pose,
+            joints: model.joints(&em.pose),
+            labels,
+            energy: em.energy,
+            energy_trace: em.energy_trace,
+            iterations: em.iterations,
+            termination: em.termination,
+            part_counts: em.part_counts,
+            outliers: em.outliers,
+        });
+    };
+    // EM on the sub-sampled cloud. The data term sums over s² times fewer points, so
+    // the prior weight shrinks by s² to keep the balance of the full-resolution fit.
+    let sub_graph = neighbour_graph(&sub_cloud, config.connectivity);
+    let scaled_prior = prior.map(|p| PosePrior {
+        weights: p.weights.map(|w| w / (s * s) as f64),
+        ..p.clone()
+    });
+    let em = hard_em(
+        model,
+        &sub_cloud.points,
+        &sub_graph,
+        &init,
+        scaled_prior.as_ref(),
+        &config.em,
+    )?;
+    // Then every full-resolution pixel: starting from the label of its sub-sampled
+    // pixel (the one at the top-left of its s×s block) or, without one, the cheapest
+    // label, one E-step for the final pose at the final outlier distance.
+    let mut block_label = vec![-2i32; sub_cam.width * sub_cam.height];
+    for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
+        block_label[px as usize] = l;
+    }
+    let w = camera.width;
+    let init_labels: Vec<i32> = cloud
+        .pixels
+        .iter()
+        .map(|&px| {
+            let (r, c) = (px as usize / w, px as usize % w);
+            match block_label[(r / s) * sub_cam.width + c / s] {
+                -2 => OUTLIER,
+                -1 => OUTLIER,
+                l => l,
+            }
+        })
+        .collect();
+    let tau = config.em.outlier_distance_at(em.iterations);
+    let (point_labels, crf) = label_points(
+        model,
+        &cloud.points,
+        &graph,
+        &em.pose,
+        &init_labels,
+        tau,
+        &config.em,
+    )?;
     let mut labels = vec![-1i16; depth.len()];
-    for (&px, &l) in cloud.pixels.iter().zip(&em.labels) {
+    let mut part_counts = [0usize; NUM_SEGMENTS];
+    let mut outliers = 0;
+    for (&px, &l) in cloud.pixels.iter().zip(&point_labels) {
         labels[px as usize] = l as i16;
+        if l < 0 {
+            outliers += 1;
+        } else {
+            part_counts[l as usize] += 1;
+        }
     }
     Ok(FitResult {
         pose: em.pose,
         joints: model.joints(&em.pose),
         labels,
-        energy: em.energy,
+        energy: crf + prior.map_or(0.0, |p| p.cost(&em.pose)),
         energy_trace: em.energy_trace,
         iterations: em.iterations,
         termination: em.termination,
-        part_counts: em.part_counts,
-        outliers: em.outliers,
+        part_counts,
+        outliers,
     })
 }
 

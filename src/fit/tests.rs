@@ -229,3 +229,66 @@ fn background_clutter_becomes_outliers() {
     let (mean, _) = joint_errors(&model, &r.pose, &truth);
     assert!(mean < 0.01, "mean {mean}");
 }
+
+/// EM on every second pixel of every second row, then one full-resolution E-step: the
+/// pose is recovered about as well as at full resolution, every foreground pixel gets
+/// a label, and the labels agree with the full-resolution fit almost everywhere.
+#[test]
+fn stride_two_recovers_pose_and_labels_every_pixel() {
+    let model = BodyModel::default();
+    let cam = Camera::itop();
+    let truth = natural_pose();
+    let (depth, _) = model.render_depth(&truth, &cam);
+    let n_fg = depth.iter().filter(|z| **z > 0.0).count();
+    let strided = FitConfig {
+        stride: 2,
+        ..FitConfig::default()
+    };
+    let mut good = 0;
+    for seed in 1..7 {
+        let init = perturbed(&truth, seed, 20f64.to_radians(), 0.1);
+        let r = fit_pose(&depth, &cam, &init, &model, None, None, &strided).unwrap();
+        assert!(r.energy_trace.windows(2).all(|w| w[1] <= w[0]));
+        assert_eq!(r.part_counts.iter().sum::<usize>() + r.outliers, n_fg);
+        let labelled = r.labels.iter().filter(|&&l| l >= 0).count();
+        assert_eq!(labelled, n_fg - r.outliers);
+        let mean = joint_errors(&model, &r.pose, &truth).0;
+        if mean < 0.015 {
+            good += 1;
+            let full = fit_pose(
+                &depth,
+                &cam,
+                &init,
+                &model,
+                None,
+                None,
+                &FitConfig::default(),
+            )
+            .unwrap();
+            let same = r
+                .labels
+                .iter()
+                .zip(&full.labels)
+                .filter(|(a, b)| a == b)
+                .count();
+            let agree = (same - (depth.len() - n_fg)) as f64 / n_fg as f64;
+            assert!(agree > 0.95, "seed {seed}: labels agree on {agree}");
+        }
+    }
+    assert!(good >= 5, "{good} of 6 starts within 1.5 cm");
+}
+
+#[test]
+fn stride_out_of_range_is_an_error() {
+    let model = BodyModel::default();
+    let cam = Camera::itop().scaled(0.5).unwrap();
+    let (depth, _) = model.render_depth(&natural_pose(), &cam);
+    for stride in [0, MAX_STRIDE + 1] {
+        let cfg = FitConfig {
+            stride,
+            ..FitConfig::default()
+        };
+        let err = fit_pose(&depth, &cam, &natural_pose(), &model, None, None, &cfg).unwrap_err();
+        assert!(err.to_string().contains("stride"), "{err}");
+    }
+}

@@ -35,6 +35,7 @@ pub struct PyFitConfig {
     expansion_cycles: usize,
     lm_max_iterations: usize,
     connectivity: u32,
+    stride: usize,
 }
 
 impl PyFitConfig {
@@ -82,10 +83,13 @@ impl PyFitConfig {
             }
             other => other,
         })?;
-        Ok(FitConfig {
+        let cfg = FitConfig {
             em,
             connectivity: Connectivity::from_int(self.connectivity)?,
-        })
+            stride: self.stride,
+        };
+        cfg.validate()?;
+        Ok(cfg)
     }
 }
 
@@ -100,7 +104,7 @@ impl PyFitConfig {
         contrast_weight=None, contrast_sigma=None, outlier_distance=None,
         outlier_distance_start=None, anneal_iterations=None, truncation_factor=None,
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
-        expansion_cycles=None, lm_max_iterations=None, connectivity=4))]
+        expansion_cycles=None, lm_max_iterations=None, connectivity=4, stride=1))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma: Option<f64>,
@@ -119,6 +123,7 @@ impl PyFitConfig {
         expansion_cycles: Option<i64>,
         lm_max_iterations: Option<i64>,
         connectivity: i64,
+        stride: i64,
     ) -> PyResult<Self> {
         let d = EmConfig::default();
         let count = |v: Option<i64>, default: usize, name: &str| -> PyResult<usize> {
@@ -145,6 +150,7 @@ impl PyFitConfig {
             expansion_cycles: count(expansion_cycles, d.expansion_cycles, "expansion_cycles")?,
             lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
             connectivity: u32::try_from(connectivity).unwrap_or(0),
+            stride: usize::try_from(stride).unwrap_or(0),
         };
         cfg.to_rust()?;
         Ok(cfg)
@@ -152,9 +158,9 @@ impl PyFitConfig {
 
     fn __repr__(&self) -> String {
         format!(
-            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={})",
+            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={})",
             self.sigma, self.loss, self.potts, self.contrast_weight, self.outlier_distance,
-            self.max_iterations
+            self.max_iterations, self.stride
         )
     }
 }
