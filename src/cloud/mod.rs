@@ -306,71 +306,194 @@ pub fn normals_into(
     assert_eq!(out.len(), cloud.len());
     let r = config.radius.max(1);
     let (w, h) = (depth.width, depth.height);
-    let (inv_fx, inv_fy, cx, cy) = (
-        1.0 / camera.fx as f32,
-        1.0 / camera.fy as f32,
+    let (fx, fy, cx, cy) = (
+        camera.fx as f32,
+        camera.fy as f32,
         camera.cx as f32,
         camera.cy as f32,
     );
-    let (jump_scale, rf) = (config.jump_scale, r as f32);
+    // (col − cx) of every column, exactly as the back-projection computes it.
+    let x_of_col: Vec<f32> = (0..w).map(|col| col as f32 - cx).collect();
+    // Stands in for the stencil rows above and below the image: no reading anywhere.
+    let no_row = vec![0.0f32; w];
+    let depth_row = |rr: usize| match rr < h {
+        true => &depth.data[rr * w..(rr + 1) * w],
+        false => &no_row[..],
+    };
     // Rows in parallel; the points of a row are contiguous.
     split_rows(out, &cloud.row_start)
         .into_par_iter()
         .with_min_len(ROWS_PER_TASK)
         .enumerate()
-        .for_each(|(row, normals)| {
+        .for_each_init(DenseNormals::default, |dense, (row, normals)| {
             if normals.is_empty() {
                 return;
             }
             let first = cloud.row_start[row] as usize;
             let points = &cloud.points[first..first + normals.len()];
             let pixels = &cloud.pixels[first..first + normals.len()];
-            // The depth rows of the stencil; a row outside the image is empty, so that
-            // every look-up into it finds no reading.
-            let depth_row = |rr: Option<usize>| match rr {
-                Some(rr) if rr < h => &depth.data[rr * w..(rr + 1) * w],
-                _ => &[][..],
+            let stencil = NormalRow {
+                up: row.checked_sub(r).map_or(&no_row[..], depth_row),
+                here: depth_row(row),
+                down: depth_row(row + r),
+                x_of_col: &x_of_col,
+                y_up: (row as isize - r as isize) as f32 - cy,
+                y_here: row as f32 - cy,
+                y_down: (row + r) as f32 - cy,
+                y_point: (row as f32 - cy) / fy,
+                fx,
+                inv_fx: 1.0 / fx,
+                inv_fy: 1.0 / fy,
+                r,
+                jump_scale: config.jump_scale,
             };
-            let (up, here, down) = (
-                depth_row(row.checked_sub(r)),
-                depth_row(Some(row)),
-                depth_row(Some(row + r)),
-            );
-            // (row − cy) of the three stencil rows, as the back-projection computes it.
-            let (y_up, y_here, y_down) = (
-                (row as isize - r as isize) as f32 - cy,
-                row as f32 - cy,
-                (row + r) as f32 - cy,
-            );
+            // The columns from the row's first to its last point whose whole stencil is
+            // in the image go through the branch-free kernel, the others one by one.
             let first_pixel = (row * w) as u32;
+            let col_of = |pixel: u32| (pixel - first_pixel) as usize;
+            let lo = col_of(pixels[0]).max(r);
+            let hi = (col_of(pixels[pixels.len() - 1]) + 1).min(w.saturating_sub(r));
+            if lo < hi {
+                stencil.dense(lo, hi, dense);
+            }
             for ((n, &p), &pixel) in normals.iter_mut().zip(points).zip(pixels) {
-                let col = (pixel - first_pixel) as usize;
-                let jump = surface_jump(p[2]) * jump_scale * rf;
-                // The neighbour's point at (y, column x, depth z) if it is a reading on
-                // the same surface as p, else p itself: a tangent from a missing side
-                // then runs from (or to) p, and with both sides missing it is zero, which
-                // makes the cross product zero and the normal the fallback below.
-                let near = |y: f32, x: usize, z: Option<&f32>| -> [f32; 3] {
-                    match z {
-                        Some(&z) if z > 0.0 && (z - p[2]).abs() <= jump => {
-                            [(x as f32 - cx) * z * inv_fx, y * z * inv_fy, z]
-                        }
-                        _ => p,
+                let col = col_of(pixel);
+                *n = if (lo..hi).contains(&col) {
+                    let i = col - lo;
+                    match dense.ok[i] {
+                        true => [dense.x[i], dense.y[i], dense.z[i]],
+                        false => normalize([-p[0], -p[1], -p[2]]),
                     }
+                } else {
+                    stencil.one(p, col)
                 };
-                let left = col.wrapping_sub(r); // wraps past the row's end when off-image
-                let tu = sub(
-                    near(y_here, col + r, here.get(col + r)),
-                    near(y_here, left, here.get(left)),
-                );
-                let tv = sub(
-                    near(y_down, col, down.get(col)),
-                    near(y_up, col, up.get(col)),
-                );
-                *n = facing_normal(cross(tu, tv), p)
-                    .unwrap_or_else(|| normalize([-p[0], -p[1], -p[2]]));
             }
         });
+}
+
+/// The depth rows and constants of the normals of one image row.
+struct NormalRow<'a> {
+    /// Depth rows `radius` above, at and `radius` below the row (no reading outside the
+    /// image).
+    up: &'a [f32],
+    here: &'a [f32],
+    down: &'a [f32],
+    /// (col − cx) of every column.
+    x_of_col: &'a [f32],
+    /// (row − cy) of the three rows, and (row − cy)/fy for the points themselves.
+    y_up: f32,
+    y_here: f32,
+    y_down: f32,
+    y_point: f32,
+    fx: f32,
+    inv_fx: f32,
+    inv_fy: f32,
+    r: usize,
+    jump_scale: f32,
+}
+
+/// Normals of a span of columns, component by component, and whether each is valid
+/// (false: the point gets the normal facing the camera).
+#[derive(Default)]
+struct DenseNormals {
+    x: Vec<f32>,
+    y: Vec<f32>,
+    z: Vec<f32>,
+    ok: Vec<bool>,
+}
+
+impl NormalRow<'_> {
+    /// The normal of point `p` at column `col`, with every neighbour looked up through
+    /// bounds checks.
+    fn one(&self, p: [f32; 3], col: usize) -> [f32; 3] {
+        let jump = surface_jump(p[2]) * self.jump_scale * self.r as f32;
+        // The neighbour's point at (y, column x) if it is a reading on the same surface
+        // as p, else p itself: a tangent from a missing side then runs from (or to) p,
+        // and with both sides missing it is zero, which makes the cross product zero
+        // and the normal the fallback below.
+        let near = |y: f32, x: usize, z: Option<&f32>| -> [f32; 3] {
+            match z {
+                Some(&z) if z > 0.0 && (z - p[2]).abs() <= jump => {
+                    [self.x_of_col[x] * z * self.inv_fx, y * z * self.inv_fy, z]
+                }
+                _ => p,
+            }
+        };
+        let (left, right) = (col.wrapping_sub(self.r), col + self.r); // wraps when off-image
+        let tu = sub(
+            near(self.y_here, right, self.here.get(right)),
+            near(self.y_here, left, self.here.get(left)),
+        );
+        let tv = sub(
+            near(self.y_down, col, self.down.get(col)),
+            near(self.y_up, col, self.up.get(col)),
+        );
+        facing_normal(cross(tu, tv), p).unwrap_or_else(|| normalize([-p[0], -p[1], -p[2]]))
+    }
+
+    /// [`NormalRow::one`] for every column in `lo..hi` (`r <= lo`, `hi + r <= width`),
+    /// without branches so that the compiler can vectorise it; the fallback normal is
+    /// left to the caller (`ok` false). Pixels without a reading get garbage.
+    fn dense(&self, lo: usize, hi: usize, out: &mut DenseNormals) {
+        let (n, r) = (hi - lo, self.r);
+        for v in [&mut out.x, &mut out.y, &mut out.z] {
+            v.resize(n, 0.0);
+        }
+        out.ok.resize(n, false);
+        let (ox, oy, oz, ok) = (
+            &mut out.x[..n],
+            &mut out.y[..n],
+            &mut out.z[..n],
+            &mut out.ok[..n],
+        );
+        let (z_here, z_left, z_right) = (
+            &self.here[lo..hi],
+            &self.here[lo - r..hi - r],
+            &self.here[lo + r..hi + r],
+        );
+        let (z_up, z_down) = (&self.up[lo..hi], &self.down[lo..hi]);
+        let (x_here, x_left, x_right) = (
+            &self.x_of_col[lo..hi],
+            &self.x_of_col[lo - r..hi - r],
+            &self.x_of_col[lo + r..hi + r],
+        );
+        let (jump_scale, rf) = (self.jump_scale, r as f32);
+        for i in 0..n {
+            let z = z_here[i];
+            let p = [x_here[i] * z / self.fx, self.y_point * z, z];
+            let jump = surface_jump(z) * jump_scale * rf;
+            let pick = |x: f32, y: f32, zn: f32| -> [f32; 3] {
+                let near = (zn > 0.0) & ((zn - z).abs() <= jump);
+                let q = [x * zn * self.inv_fx, y * zn * self.inv_fy, zn];
+                [
+                    if near { q[0] } else { p[0] },
+                    if near { q[1] } else { p[1] },
+                    if near { q[2] } else { p[2] },
+                ]
+            };
+            let tu = sub(
+                pick(x_right[i], self.y_here, z_right[i]),
+                pick(x_left[i], self.y_here, z_left[i]),
+            );
+            let tv = sub(
+                pick(x_here[i], self.y_down, z_down[i]),
+                pick(x_here[i], self.y_up, z_up[i]),
+            );
+            // facing_normal without its branches; −1/len is exactly −(1/len).
+            let c = cross(tu, tv);
+            let len = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            let inv = 1.0 / len;
+            let s = if c[0] * p[0] + c[1] * p[1] + c[2] * p[2] > 0.0 {
+                -inv
+            } else {
+                inv
+            };
+            ox[i] = c[0] * s;
+            oy[i] = c[1] * s;
+            oz[i] = c[2] * s;
+            ok[i] = (len > 0.0) & (len < f32::INFINITY);
+        }
+    }
 }
 
 /// The unit normal along `c`, flipped to face the camera at the origin from `p`; None if
@@ -516,16 +639,46 @@ fn fill_row_edges<const EIGHT: bool>(
     distance: &mut [f32],
     depth_diff: &mut [f32],
 ) {
+    let (w, h) = (cloud.width, cloud.height);
+    let (first, end) = (
+        cloud.row_start[row] as usize,
+        cloud.row_start[row + 1] as usize,
+    );
+    let first_pixel = (row * w) as u32;
+    let here = &cloud.point_of_pixel[row * w..(row + 1) * w];
+    let below = if row + 1 < h {
+        &cloud.point_of_pixel[(row + 1) * w..(row + 2) * w]
+    } else {
+        &[][..]
+    };
+    let point = |lookup: &[i32], col: usize| lookup.get(col).copied().unwrap_or(-1);
     let points = &cloud.points[..];
     let mut k = 0;
-    row_edges::<EIGHT>(cloud, row, |a, b| {
-        let d = sub(points[b as usize], points[a as usize]);
-        edges[k] = [a, b];
-        // The squared distance for now: the square roots are taken below, all at once.
-        distance[k] = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-        depth_diff[k] = d[2];
-        k += 1;
-    });
+    // The edge a→b (b ≥ 0); the squared distance for now, the square roots are taken
+    // below, all at once.
+    let mut emit = |a: u32, p: [f32; 3], b: i32| {
+        if b >= 0 {
+            let d = sub(points[b as usize], p);
+            edges[k] = [a, b as u32];
+            distance[k] = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            depth_diff[k] = d[2];
+            k += 1;
+        }
+    };
+    for ((a, &pixel), &p) in (first as u32..)
+        .zip(&cloud.pixels[first..end])
+        .zip(&points[first..end])
+    {
+        let col = (pixel - first_pixel) as usize;
+        emit(a, p, point(here, col + 1));
+        if EIGHT {
+            emit(a, p, point(below, col.wrapping_sub(1)));
+        }
+        emit(a, p, point(below, col));
+        if EIGHT {
+            emit(a, p, point(below, col + 1));
+        }
+    }
     for d in distance.iter_mut() {
         *d = d.sqrt();
     }
