@@ -162,10 +162,8 @@ impl Cloud {
                     first_pixel: (row * w) as u32,
                     first_point: row_start[row] as i32,
                 };
-                match mask {
-                    None => fill.run(z, |_| true, points, pixels, lookup),
-                    Some(m) => fill.run(z, |col| m[row * w + col], points, pixels, lookup),
-                }
+                let mask = mask.map(|m| &m[row * w..(row + 1) * w]);
+                fill.run(z, mask, points, pixels, lookup);
             });
         Ok(())
     }
@@ -214,30 +212,71 @@ struct FillRow {
 }
 
 impl FillRow {
-    /// Writes the points of the row's pixels with a reading for which `keep(col)` holds
-    /// (`points`/`pixels` hold exactly that many) and the row of the pixel→point lookup.
+    /// Writes the points of the row's pixels with a reading (and in `mask`, if given:
+    /// `points`/`pixels` hold exactly that many) and the row of the pixel→point lookup.
     #[inline(always)]
     fn run(
         &self,
         depth: &[f32],
-        keep: impl Fn(usize) -> bool,
+        mask: Option<&[bool]>,
         points: &mut [[f32; 3]],
         pixels: &mut [u32],
         lookup: &mut [i32],
     ) {
+        lookup.fill(-1);
+        let lookup = &mut lookup[..depth.len()];
         let mut k = 0;
-        for (col, (&z, slot)) in depth.iter().zip(lookup.iter_mut()).enumerate() {
-            if z > 0.0 && keep(col) {
+        // Which pixels of a chunk to keep as bits, computed without branches; then one
+        // step per kept pixel, none per skipped one.
+        const CHUNK: usize = 32;
+        for (c, z) in depth.chunks(CHUNK).enumerate() {
+            let c0 = c * CHUNK;
+            let mut bits = match mask {
+                None => keep_bits(z, |_| true),
+                Some(m) => {
+                    let m = &m[c0..c0 + z.len()];
+                    keep_bits(z, |j| m[j])
+                }
+            };
+            if bits == u32::MAX {
+                // A full chunk (the common case without a mask): a plain loop.
+                let n = CHUNK;
+                for (j, ((&z, point), pixel)) in z
+                    .iter()
+                    .zip(&mut points[k..k + n])
+                    .zip(&mut pixels[k..k + n])
+                    .enumerate()
+                {
+                    let col = c0 + j;
+                    *point = [(col as f32 - self.cx) * z / self.fx, self.y * z, z];
+                    *pixel = self.first_pixel + col as u32;
+                }
+                for (j, slot) in lookup[c0..c0 + n].iter_mut().enumerate() {
+                    *slot = self.first_point + (k + j) as i32;
+                }
+                k += n;
+                continue;
+            }
+            while bits != 0 {
+                let j = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let (col, z) = (c0 + j, z[j]);
                 // Same expression (and rounding) as ever: (col − cx)·z / fx.
                 points[k] = [(col as f32 - self.cx) * z / self.fx, self.y * z, z];
                 pixels[k] = self.first_pixel + col as u32;
-                *slot = self.first_point + k as i32;
+                lookup[col] = self.first_point + k as i32;
                 k += 1;
-            } else {
-                *slot = -1;
             }
         }
     }
+}
+
+/// Bit j set when `z[j]` is a reading and `keep(j)` (at most 32 pixels).
+#[inline(always)]
+fn keep_bits(z: &[f32], keep: impl Fn(usize) -> bool) -> u32 {
+    z.iter().enumerate().fold(0u32, |bits, (j, &z)| {
+        bits | (((z > 0.0) & keep(j)) as u32) << j
+    })
 }
 
 /// Splits a per-point (or per-edge) array into the per-row pieces given by `offsets`
