@@ -616,60 +616,44 @@ impl PixelGraph {
     }
 }
 
-/// Calls `f(a, b)` for each forward edge (point indices a < b) starting in `row`, in
-/// pixel order: for each point of the row, its neighbours right, down-left, down and
-/// down-right (8-connectivity; right and down only for 4).
+/// Number of forward edges starting in `row` (those of [`fill_row_edges`]), counted
+/// over the columns from the row's first to its last point with sums the compiler
+/// vectorises: two look-up entries a, b are both points exactly when `a | b >= 0`.
 #[inline(always)]
-fn row_edges<const EIGHT: bool>(cloud: &Cloud, row: usize, mut f: impl FnMut(u32, u32)) {
+fn row_edge_count<const EIGHT: bool>(cloud: &Cloud, row: usize) -> u32 {
     let (w, h) = (cloud.width, cloud.height);
     let (first, end) = (
         cloud.row_start[row] as usize,
         cloud.row_start[row + 1] as usize,
     );
-    let first_pixel = (row * w) as u32;
+    if first == end {
+        return 0;
+    }
+    let col_of = |k: usize| cloud.pixels[k] as usize - row * w;
+    let (c0, c1) = (col_of(first), col_of(end - 1) + 1);
     let here = &cloud.point_of_pixel[row * w..(row + 1) * w];
-    // The next row's look-up; empty below the image so that no look-up finds a point.
-    let below = if row + 1 < h {
-        &cloud.point_of_pixel[(row + 1) * w..(row + 2) * w]
-    } else {
-        &[][..]
+    let pairs = |a: &[i32], b: &[i32]| -> u32 {
+        a.iter().zip(b).map(|(&a, &b)| ((a | b) >= 0) as u32).sum()
     };
-    let point = |lookup: &[i32], col: usize| lookup.get(col).copied().unwrap_or(-1);
-    for (a, &pixel) in (first as u32..).zip(&cloud.pixels[first..end]) {
-        let col = (pixel - first_pixel) as usize;
-        let right = point(here, col + 1);
-        if right >= 0 {
-            f(a, right as u32);
-        }
+    let mut count = pairs(&here[c0..c1 - 1], &here[c0 + 1..c1]); // right
+    if row + 1 < h {
+        let below = &cloud.point_of_pixel[(row + 1) * w..(row + 2) * w];
+        count += pairs(&here[c0..c1], &below[c0..c1]); // down
         if EIGHT {
-            // wrapping_sub: column −1 is past the row's end, outside the slice.
-            let b = point(below, col.wrapping_sub(1));
-            if b >= 0 {
-                f(a, b as u32);
-            }
-        }
-        let b = point(below, col);
-        if b >= 0 {
-            f(a, b as u32);
-        }
-        if EIGHT {
-            let b = point(below, col + 1);
-            if b >= 0 {
-                f(a, b as u32);
+            let l0 = c0.max(1);
+            count += pairs(&here[l0..c1], &below[l0 - 1..c1 - 1]); // down-left
+            let r1 = c1.min(w - 1);
+            if c0 < r1 {
+                count += pairs(&here[c0..r1], &below[c0 + 1..r1 + 1]); // down-right
             }
         }
     }
-}
-
-/// Number of forward edges starting in `row` (see [`row_edges`]).
-#[inline(always)]
-fn row_edge_count<const EIGHT: bool>(cloud: &Cloud, row: usize) -> u32 {
-    let mut count = 0u32;
-    row_edges::<EIGHT>(cloud, row, |_, _| count += 1);
     count
 }
 
-/// Fills the edges starting in `row` (their exact number) with their attributes.
+/// Fills the edges starting in `row` (their exact number) with their attributes, in
+/// pixel order: for each point of the row (a), its neighbours (b > a) right, down-left,
+/// down and down-right (8-connectivity; right and down only for 4).
 #[inline(always)]
 fn fill_row_edges<const EIGHT: bool>(
     cloud: &Cloud,
