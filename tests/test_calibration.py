@@ -116,6 +116,10 @@ def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
         ("calibration_prior_weight", float("nan")),
         ("prior_weight", float("inf")),
         ("velocity_damping", 2.0),
+        ("track_stride", 0),
+        ("track_stride", 9),
+        ("candidate_stride", 0),
+        ("candidate_stride", 1.5),
     ],
 )
 def test_nonsense_calibration_settings_are_rejected(field, value):

@@ -71,6 +71,11 @@ class Graph:
         the next :meth:`maxflow` reuses the previous search trees (dynamic cuts)."""
         self._g.update_terminal_edges(_c(nodes), _c(delta_source), _c(delta_sink))
 
+    def finalize(self) -> None:
+        """Build the arc arrays now (else the next ``maxflow()`` does), so that
+        ``maxflow()`` times the solve alone."""
+        self._g.finalize()
+
     def maxflow(self) -> Number:
         """The maximum flow value (int for an int graph)."""
         return self._g.maxflow()  # type: ignore[no-any-return]

@@ -63,8 +63,8 @@ class PipelineConfig:
     candidate_stride: int = 2
     #: Tracking: weight of the prior toward the predicted pose (see ``fit_pose``).
     prior_weight: float = 100.0
-    #: Tracking: EM iterations per tracked frame.
-    track_iterations: int = 4
+    #: Tracking: EM iterations per tracked frame (on the ``track_stride`` grid).
+    track_iterations: int = 6
     #: Tracking: EM of a tracked frame runs on every ``track_stride``-th pixel of every
     #: ``track_stride``-th row, then labels the full resolution once (``FitConfig``'s
     #: ``stride``; 1 = every pixel). See docs/pipeline.md for speed and accuracy.

@@ -1065,45 +1065,54 @@ impl<C: Capacity> Graph<C> {
         let ts_i = ts_of(ni.tsd);
         let dist_i = dist_of(ni.tsd);
         let child_tsd = pack_tsd(ts_i, dist_i + 1);
-        for a in lo..hi {
-            let hw = heads[a];
-            // Residual capacity away from the root: i→j in S, j→i in T.
-            let s = if sink {
+        if !sink {
+            for a in lo..hi {
+                // Residual i→j (sequential in the arc array: checked first).
+                if caps[a] <= C::ZERO {
+                    continue;
+                }
+                let hw = heads[a];
+                let j = (hw & HEAD_MASK) as usize;
+                let nj = nodes[j];
+                if nj.parent == FREE {
+                    let s = sister_of(first, overflow, a, hw);
+                    nodes[j].parent = s as u32 | tree;
+                    nodes[j].tsd = child_tsd;
+                    active.push(j as u32);
+                } else if nj.parent & SINK_BIT != tree {
+                    return a as u32;
+                } else if ts_of(nj.tsd) <= ts_i && dist_of(nj.tsd) > dist_i {
+                    // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
+                    nodes[j].parent = sister_of(first, overflow, a, hw) as u32 | tree;
+                    nodes[j].tsd = child_tsd;
+                }
+            }
+        } else {
+            for a in lo..hi {
+                // The residual j→i sits in j's arc list (two random reads: the offset
+                // and the capacity), so the neighbour's state is checked first: most
+                // neighbours of a tree node are in its own tree and need no capacity.
+                let hw = heads[a];
+                let j = (hw & HEAD_MASK) as usize;
+                let nj = nodes[j];
+                let same_tree = nj.parent != FREE && nj.parent & SINK_BIT == tree;
+                let shortcut = ts_of(nj.tsd) <= ts_i && dist_of(nj.tsd) > dist_i;
+                if same_tree && !shortcut {
+                    continue;
+                }
                 let s = sister_of(first, overflow, a, hw);
                 if caps[s] <= C::ZERO {
                     continue;
                 }
-                s
-            } else {
-                if caps[a] <= C::ZERO {
-                    continue;
-                }
-                usize::MAX
-            };
-            let j = (hw & HEAD_MASK) as usize;
-            let pj = nodes[j].parent;
-            if pj == FREE {
-                let s = if sink {
-                    s
-                } else {
-                    sister_of(first, overflow, a, hw)
-                };
-                nodes[j].parent = s as u32 | tree;
-                nodes[j].tsd = child_tsd;
-                active.push(j as u32);
-            } else if pj & SINK_BIT != tree {
-                return if sink { s as u32 } else { a as u32 };
-            } else {
-                let tj = nodes[j].tsd;
-                if ts_of(tj) <= ts_i && dist_of(tj) > dist_i {
-                    // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
-                    let s = if sink {
-                        s
-                    } else {
-                        sister_of(first, overflow, a, hw)
-                    };
+                if same_tree {
                     nodes[j].parent = s as u32 | tree;
                     nodes[j].tsd = child_tsd;
+                } else if nj.parent == FREE {
+                    nodes[j].parent = s as u32 | tree;
+                    nodes[j].tsd = child_tsd;
+                    active.push(j as u32);
+                } else {
+                    return s as u32;
                 }
             }
         }

@@ -265,6 +265,16 @@ impl PyGraph {
         Ok(())
     }
 
+    /// Builds the arc arrays from the edges added so far (otherwise the next `maxflow()`
+    /// does it), so that `maxflow()` times the solve alone. Edges added later are merged
+    /// by another build.
+    fn finalize(&mut self, py: Python<'_>) {
+        match &mut self.inner {
+            Inner::F(g) => py.detach(|| g.finalize()),
+            Inner::I(g) => py.detach(|| g.finalize()),
+        }
+    }
+
     /// Computes the maximum flow; returns its value (float, or int for an int graph).
     fn maxflow(&mut self, py: Python<'_>) -> PyResult<Py<PyAny>> {
         Ok(match &mut self.inner {
