@@ -176,7 +176,7 @@ pub fn fit_pose(
     let sub_graph = neighbour_graph(&sub_cloud, config.connectivity);
     let scaled_prior = prior.map(|p| PosePrior {
         weights: p.weights.map(|w| w / (s * s) as f64),
-        ..p.clone()
+        ..*p
     });
     let em = hard_em(
         model,

@@ -1088,11 +1088,11 @@ impl<C: Capacity> Graph<C> {
                 }
             }
         } else {
-            for a in lo..hi {
+            for (k, &hw) in heads[lo..hi].iter().enumerate() {
                 // The residual j→i sits in j's arc list (two random reads: the offset
                 // and the capacity), so the neighbour's state is checked first: most
                 // neighbours of a tree node are in its own tree and need no capacity.
-                let hw = heads[a];
+                let a = lo + k;
                 let j = (hw & HEAD_MASK) as usize;
                 let nj = nodes[j];
                 let same_tree = nj.parent != FREE && nj.parent & SINK_BIT == tree;
