@@ -187,8 +187,9 @@ pub fn fit_pose(
         &config.em,
     )?;
     // Then every full-resolution pixel: starting from the label of its sub-sampled
-    // pixel (the one at the top-left of its s×s block) or, without one, the cheapest
-    // label, one E-step for the final pose at the final outlier distance.
+    // pixel (the one at the top-left of its s×s block) or, without one (no reading
+    // there), the outlier label, one E-step for the final pose at the final outlier
+    // distance; the expansion moves such pixels to a part where that is cheaper.
     let mut block_label = vec![-2i32; sub_cam.width * sub_cam.height];
     for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
         block_label[px as usize] = l;
@@ -200,8 +201,7 @@ pub fn fit_pose(
         .map(|&px| {
             let (r, c) = (px as usize / w, px as usize % w);
             match block_label[(r / s) * sub_cam.width + c / s] {
-                -2 => OUTLIER,
-                -1 => OUTLIER,
+                l if l < 0 => OUTLIER, // no sub-sampled point, or labelled outlier
                 l => l,
             }
         })
