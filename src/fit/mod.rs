@@ -207,6 +207,11 @@ pub fn fit_pose(
         })
         .collect();
     let tau = config.em.outlier_distance_at(em.iterations);
+    // One expansion cycle: the start is already the sub-sampled EM's labelling.
+    let final_em = EmConfig {
+        expansion_cycles: 1,
+        ..config.em
+    };
     let (point_labels, crf) = label_points(
         model,
         &cloud.points,
@@ -214,7 +219,7 @@ pub fn fit_pose(
         &em.pose,
         &init_labels,
         tau,
-        &config.em,
+        &final_em,
     )?;
     let mut labels = vec![-1i16; depth.len()];
     let mut part_counts = [0usize; NUM_SEGMENTS];
