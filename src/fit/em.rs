@@ -314,10 +314,46 @@ pub fn crf_energy(unary: &[f64], edges: &[[u32; 2]], weights: &[f64], labels: &[
     u + p
 }
 
+/// Labels as reported to callers, with what they contain.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointLabels {
+    /// Per point: segment 0..[`NUM_SEGMENTS`], −1 = outlier.
+    pub labels: Vec<i32>,
+    /// Points labelled with each segment.
+    pub part_counts: [usize; NUM_SEGMENTS],
+    /// Points labelled outlier.
+    pub outliers: usize,
+}
+
+impl PointLabels {
+    /// From the solver's labels (outlier label [`OUTLIER`]).
+    fn new(solver_labels: Vec<i32>) -> Self {
+        let mut part_counts = [0usize; NUM_SEGMENTS];
+        let mut outliers = 0;
+        let labels = solver_labels
+            .into_iter()
+            .map(|l| {
+                if l == OUTLIER {
+                    outliers += 1;
+                    -1
+                } else {
+                    part_counts[l as usize] += 1;
+                    l
+                }
+            })
+            .collect();
+        PointLabels {
+            labels,
+            part_counts,
+            outliers,
+        }
+    }
+}
+
 /// One E-step on its own: the CRF labels of `points` for a fixed `pose` at outlier
 /// distance `tau`, by alpha-expansion from `init` (labels in `0..NUM_LABELS`, the outlier
-/// label being [`NUM_SEGMENTS`]). Returns the labels (outlier as −1) and the CRF energy.
-/// Used to label the full-resolution cloud after EM ran on a sub-sampled one.
+/// label being [`NUM_SEGMENTS`]). Returns the labels and the CRF energy. Used to label
+/// the full-resolution cloud after EM ran on a sub-sampled one.
 pub fn label_points(
     model: &BodyModel,
     points: &[[f32; 3]],
@@ -326,7 +362,7 @@ pub fn label_points(
     init: &[i32],
     tau: f64,
     config: &EmConfig,
-) -> Result<(Vec<i32>, f64)> {
+) -> Result<(PointLabels, f64)> {
     config.validate()?;
     let n = points.len();
     if init.len() != n {
@@ -346,12 +382,7 @@ pub fn label_points(
     let lab =
         solver.alpha_expansion(&problem(&unary, &graph.edges, &weights), Some(init), &moves)?;
     let energy = crf_energy(&unary, &graph.edges, &weights, &lab.labels);
-    let labels = lab
-        .labels
-        .into_iter()
-        .map(|l| if l == OUTLIER { -1 } else { l })
-        .collect();
-    Ok((labels, energy))
+    Ok((PointLabels::new(lab.labels), energy))
 }
 
 /// Runs hard EM on `points` (with their neighbourhood `graph`) from `init`. `prior`, if
@@ -472,20 +503,11 @@ pub fn hard_em(
             break;
         }
     }
-    let mut part_counts = [0usize; NUM_SEGMENTS];
-    let mut outliers = 0;
-    let labels: Vec<i32> = labels
-        .into_iter()
-        .map(|l| {
-            if l == OUTLIER {
-                outliers += 1;
-                -1
-            } else {
-                part_counts[l as usize] += 1;
-                l
-            }
-        })
-        .collect();
+    let PointLabels {
+        labels,
+        part_counts,
+        outliers,
+    } = PointLabels::new(labels);
     Ok(EmResult {
         pose,
         labels,

@@ -17,7 +17,7 @@ use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
 use crate::error::{Error, Result};
 use nalgebra::Vector3;
 
-pub use em::{hard_em, label_points, EmConfig, EmResult, EmTermination, OUTLIER};
+pub use em::{hard_em, label_points, EmConfig, EmResult, EmTermination, PointLabels, OUTLIER};
 pub use ik::pose_from_joints;
 pub use lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, Termination};
 pub use objective::Loss;
@@ -73,7 +73,7 @@ fn subsample(
     camera: &Camera,
     mask: Option<&[bool]>,
     s: usize,
-) -> Result<(Vec<f32>, Option<Vec<bool>>, Camera)> {
+) -> (Vec<f32>, Option<Vec<bool>>, Camera) {
     let (w, h) = (camera.width, camera.height);
     let (sw, sh) = (w.div_ceil(s), h.div_ceil(s));
     let pick = |r: usize, c: usize| (s * r) * w + s * c;
@@ -94,7 +94,16 @@ fn subsample(
         width: sw,
         height: sh,
     };
-    Ok((sub_depth, sub_mask, cam))
+    (sub_depth, sub_mask, cam)
+}
+
+/// The H×W image of per-point labels (−1 where no point).
+fn label_image(cloud: &Cloud, labels: &[i32]) -> Vec<i16> {
+    let mut image = vec![-1i16; cloud.width * cloud.height];
+    for (&px, &l) in cloud.pixels.iter().zip(labels) {
+        image[px as usize] = l as i16;
+    }
+    image
 }
 
 /// Outcome of [`fit_pose`].
@@ -146,7 +155,7 @@ pub fn fit_pose(
     let graph = neighbour_graph(&cloud, config.connectivity);
     let s = config.stride;
     let sub = if s > 1 {
-        let (sub_depth, sub_mask, sub_cam) = subsample(depth, camera, mask, s)?;
+        let (sub_depth, sub_mask, sub_cam) = subsample(depth, camera, mask, s);
         let sub_view = DepthView::new(&sub_depth, sub_cam.height, sub_cam.width, "depth")?;
         let sub_cloud = Cloud::from_depth(&sub_view, &sub_cam, sub_mask.as_deref())?;
         (sub_cloud.len() >= MIN_POINTS).then_some((sub_cloud, sub_cam))
@@ -155,14 +164,10 @@ pub fn fit_pose(
     };
     let Some((sub_cloud, sub_cam)) = sub else {
         let em = hard_em(model, &cloud.points, &graph, &init, prior, &config.em)?;
-        let mut labels = vec![-1i16; depth.len()];
-        for (&px, &l) in cloud.pixels.iter().zip(&em.labels) {
-            labels[px as usize] = l as i16;
-        }
         return Ok(FitResult {
             pose: em.pose,
             joints: model.joints(&em.pose),
-            labels,
+            labels: label_image(&cloud, &em.labels),
             energy: em.energy,
             energy_trace: em.energy_trace,
             iterations: em.iterations,
@@ -212,7 +217,7 @@ pub fn fit_pose(
         expansion_cycles: 1,
         ..config.em
     };
-    let (point_labels, crf) = label_points(
+    let (final_labels, crf) = label_points(
         model,
         &cloud.points,
         &graph,
@@ -221,27 +226,16 @@ pub fn fit_pose(
         tau,
         &final_em,
     )?;
-    let mut labels = vec![-1i16; depth.len()];
-    let mut part_counts = [0usize; NUM_SEGMENTS];
-    let mut outliers = 0;
-    for (&px, &l) in cloud.pixels.iter().zip(&point_labels) {
-        labels[px as usize] = l as i16;
-        if l < 0 {
-            outliers += 1;
-        } else {
-            part_counts[l as usize] += 1;
-        }
-    }
     Ok(FitResult {
         pose: em.pose,
         joints: model.joints(&em.pose),
-        labels,
+        labels: label_image(&cloud, &final_labels.labels),
         energy: crf + prior.map_or(0.0, |p| p.cost(&em.pose)),
         energy_trace: em.energy_trace,
         iterations: em.iterations,
         termination: em.termination,
-        part_counts,
-        outliers,
+        part_counts: final_labels.part_counts,
+        outliers: final_labels.outliers,
     })
 }
 

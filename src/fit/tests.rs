@@ -48,6 +48,11 @@ pub(crate) fn perturbed(pose: &Pose, seed: u64, angle: f64, shift: f64) -> Pose 
     BodyModel::clamp_pose(&p)
 }
 
+/// `fit_pose` with the default settings, no mask and no prior.
+fn fit_default(depth: &[f32], cam: &Camera, init: &Pose, model: &BodyModel) -> FitResult {
+    fit_pose(depth, cam, init, model, None, None, &FitConfig::default()).unwrap()
+}
+
 fn joint_errors(model: &BodyModel, a: &Pose, b: &Pose) -> (f64, f64) {
     let (ja, jb) = (model.joints(a), model.joints(b));
     let e: Vec<f64> = (0..NUM_JOINTS).map(|j| (ja[j] - jb[j]).norm()).collect();
@@ -69,16 +74,7 @@ fn recovers_pose_from_clean_rendered_depth() {
     let mut means = Vec::new();
     for seed in 1..7 {
         let init = perturbed(&truth, seed, 20f64.to_radians(), 0.1);
-        let r = fit_pose(
-            &depth,
-            &cam,
-            &init,
-            &model,
-            None,
-            None,
-            &FitConfig::default(),
-        )
-        .unwrap();
+        let r = fit_default(&depth, &cam, &init, &model);
         means.push(joint_errors(&model, &r.pose, &truth).0);
         assert!(r.energy_trace.windows(2).all(|w| w[1] <= w[0]));
         assert_eq!(*r.energy_trace.last().unwrap(), r.energy);
@@ -102,16 +98,7 @@ fn recovers_pose_from_noisy_rendered_depth() {
         *z = ((zz + 1.5e-3 * zz * zz * rng.gaussian()) * 1000.0).round() as f32 / 1000.0;
     }
     let init = perturbed(&truth, 5, 20f64.to_radians(), 0.1);
-    let r = fit_pose(
-        &depth,
-        &cam,
-        &init,
-        &model,
-        None,
-        None,
-        &FitConfig::default(),
-    )
-    .unwrap();
+    let r = fit_default(&depth, &cam, &init, &model);
     let (mean, max) = joint_errors(&model, &r.pose, &truth);
     assert!(mean < 0.03, "mean {mean} max {max}");
 }
@@ -123,26 +110,8 @@ fn is_deterministic() {
     let truth = natural_pose();
     let (depth, _) = model.render_depth(&truth, &cam);
     let init = perturbed(&truth, 3, 0.2, 0.05);
-    let a = fit_pose(
-        &depth,
-        &cam,
-        &init,
-        &model,
-        None,
-        None,
-        &FitConfig::default(),
-    )
-    .unwrap();
-    let b = fit_pose(
-        &depth,
-        &cam,
-        &init,
-        &model,
-        None,
-        None,
-        &FitConfig::default(),
-    )
-    .unwrap();
+    let a = fit_default(&depth, &cam, &init, &model);
+    let b = fit_default(&depth, &cam, &init, &model);
     assert_eq!(a, b);
 }
 
@@ -214,16 +183,7 @@ fn background_clutter_becomes_outliers() {
     }
     assert!(wall.len() > 100);
     let init = perturbed(&truth, 11, 0.1, 0.03);
-    let r = fit_pose(
-        &depth,
-        &cam,
-        &init,
-        &model,
-        None,
-        None,
-        &FitConfig::default(),
-    )
-    .unwrap();
+    let r = fit_default(&depth, &cam, &init, &model);
     assert!(wall.iter().all(|&i| r.labels[i] == -1));
     assert!(r.outliers >= wall.len());
     let (mean, _) = joint_errors(&model, &r.pose, &truth);
@@ -255,16 +215,7 @@ fn stride_two_recovers_pose_and_labels_every_pixel() {
         let mean = joint_errors(&model, &r.pose, &truth).0;
         if mean < 0.015 {
             good += 1;
-            let full = fit_pose(
-                &depth,
-                &cam,
-                &init,
-                &model,
-                None,
-                None,
-                &FitConfig::default(),
-            )
-            .unwrap();
+            let full = fit_default(&depth, &cam, &init, &model);
             let same = r
                 .labels
                 .iter()
