@@ -1441,6 +1441,18 @@ mod tests {
         g
     }
 
+    /// Replaces the terminal capacities of nodes `i % n` in `g` (a dynamic update) and
+    /// returns the problem with the same changes.
+    fn set_terminals(p: &Problem, g: &mut Graph<i64>, changes: &[(usize, i64, i64)]) -> Problem {
+        let mut q = p.clone();
+        for &(i, s, t) in changes {
+            let i = i % p.n;
+            q.terms[i] = (s, t);
+            g.set_tweights(i, s, t).unwrap();
+        }
+        q
+    }
+
     /// Flow on every edge from residuals must respect capacities and conservation.
     /// After a dynamic update the flow is one of the reparametrised graph (both terminal
     /// arcs of a node raised alike), so terminal feasibility is only checked when fresh.
@@ -1495,12 +1507,7 @@ mod tests {
         fn dynamic_resolve_equals_fresh(p in problem(8), changes in prop::collection::vec((0usize..8, 0i64..12, 0i64..12), 1..6)) {
             let mut g = graph_of(&p);
             g.maxflow();
-            let mut q = p.clone();
-            for &(i, s, t) in &changes {
-                let i = i % p.n;
-                q.terms[i] = (s, t);
-                g.set_tweights(i, s, t).unwrap();
-            }
+            let q = set_terminals(&p, &mut g, &changes);
             let f = g.maxflow();
             let mut fresh = graph_of(&q);
             let f2 = fresh.maxflow();
@@ -1542,12 +1549,7 @@ mod tests {
             prop_assert_eq!(g.maxflow(), brute_min_cut(&p));
             check_flow(&p, &g, true);
             g.check_trees();
-            let mut q = p.clone();
-            for &(i, s, t) in &changes {
-                let i = i % p.n;
-                q.terms[i] = (s, t);
-                g.set_tweights(i, s, t).unwrap();
-            }
+            let q = set_terminals(&p, &mut g, &changes);
             prop_assert_eq!(g.maxflow(), brute_min_cut(&q));
             prop_assert_eq!(cut_value(&q, &g.segments()), g.flow());
             g.check_trees();
@@ -1617,12 +1619,7 @@ mod tests {
             prop_assert_eq!(cut_value(&p, &g.segments()), g.flow());
             check_flow(&p, &g, true);
             // Dynamic changes on top, and a graph built by the batch call.
-            let mut q = p.clone();
-            for &(i, s, t) in &changes {
-                let i = i % p.n;
-                q.terms[i] = (s, t);
-                g.set_tweights(i, s, t).unwrap();
-            }
+            let q = set_terminals(&p, &mut g, &changes);
             prop_assert_eq!(g.maxflow(), brute_min_cut(&q));
             check_flow(&q, &g, false);
             let mut b = Graph::<i64>::new(p.n);
