@@ -126,6 +126,36 @@ const INFINITE_DIST: u32 = u32::MAX;
 /// are cleared and the clock restarts (once every 65,535 augmentations).
 const MAX_TIME: u32 = 0xFFFF;
 
+/// One arc: its packed head word and its residual capacity side by side, so that the
+/// scans reading both touch one cache line. Packed to 4-byte alignment: 12 bytes for
+/// 8-byte capacities (x86-64 and aarch64 read unaligned words at full speed).
+#[derive(Clone, Copy)]
+#[repr(C, packed(4))]
+struct ArcRec<C> {
+    /// Head node (low `HEAD_BITS`) and sister hint (high bits).
+    hw: u32,
+    /// Residual capacity.
+    cap: C,
+}
+
+impl<C: Copy + Debug> Debug for ArcRec<C> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (hw, cap) = (self.hw, self.cap);
+        f.debug_struct("ArcRec")
+            .field("hw", &hw)
+            .field("cap", &cap)
+            .finish()
+    }
+}
+
+impl<C: Copy> ArcRec<C> {
+    /// The residual capacity (by value: a packed field cannot be borrowed).
+    #[inline(always)]
+    fn cap(&self) -> C {
+        self.cap
+    }
+}
+
 /// Search state of a node: 16 bytes for 8-byte capacities.
 #[derive(Clone, Copy, Debug)]
 struct Node<C> {
@@ -316,10 +346,8 @@ pub struct Graph<C: Capacity> {
     pending: Vec<(u32, u32, C, C)>,
     /// CSR: arcs of node `i` are `first[i]..first[i + 1]`.
     first: Vec<u32>,
-    /// Packed head word of each arc.
-    heads: Vec<u32>,
-    /// Residual capacity of each arc.
-    caps: Vec<C>,
+    /// Arcs: packed head word and residual capacity.
+    arcs: Vec<ArcRec<C>>,
     /// (arc, sister) for arcs with the hint `HINT_OVERFLOW`, sorted by arc.
     overflow: Vec<(u32, u32)>,
     /// Arc i→j of edge `k` (in order of addition), `NO_ARC` for self-loops; kept only
@@ -386,8 +414,7 @@ impl<C: Capacity> Graph<C> {
             n: n_nodes,
             pending,
             first,
-            heads: Vec::new(),
-            caps: Vec::new(),
+            arcs: Vec::new(),
             overflow: Vec::new(),
             edge_arc: Vec::new(),
             index_edges: false,
@@ -443,8 +470,7 @@ impl<C: Capacity> Graph<C> {
     pub fn memory_bytes(&self) -> usize {
         use std::mem::size_of;
         self.first.capacity() * 4
-            + self.heads.capacity() * 4
-            + self.caps.capacity() * size_of::<C>()
+            + self.arcs.capacity() * size_of::<ArcRec<C>>()
             + self.overflow.capacity() * 8
             + self.edge_arc.capacity() * 4
             + self.pending.capacity() * size_of::<(u32, u32, C, C)>()
@@ -685,7 +711,7 @@ impl<C: Capacity> Graph<C> {
     /// The reverse arc of arc `a`.
     #[inline(always)]
     fn sister(&self, a: usize) -> usize {
-        sister_of(&self.first, &self.overflow, a, self.heads[a])
+        sister_of(&self.first, &self.overflow, a, self.arcs[a].hw)
     }
 
     /// Builds the CSR arc arrays from all edges (keeping residuals of existing arcs).
@@ -699,8 +725,8 @@ impl<C: Capacity> Graph<C> {
                 }
                 let a = a as usize;
                 let s = self.sister(a);
-                let head = |x: usize| self.heads[x] & HEAD_MASK;
-                edges.push((head(s), head(a), self.caps[a], self.caps[s]));
+                let head = |x: usize| self.arcs[x].hw & HEAD_MASK;
+                edges.push((head(s), head(a), self.arcs[a].cap(), self.arcs[s].cap()));
             }
         } else {
             // Without an index, recover each built edge from its lower-numbered arc.
@@ -708,8 +734,8 @@ impl<C: Capacity> Graph<C> {
                 for a in self.first[i] as usize..self.first[i + 1] as usize {
                     let s = self.sister(a);
                     if a < s {
-                        let j = self.heads[a] & HEAD_MASK;
-                        edges.push((i as u32, j, self.caps[a], self.caps[s]));
+                        let j = self.arcs[a].hw & HEAD_MASK;
+                        edges.push((i as u32, j, self.arcs[a].cap(), self.arcs[s].cap()));
                     }
                 }
             }
@@ -741,13 +767,18 @@ impl<C: Capacity> Graph<C> {
         // scan order shapes the search trees and measurably affects speed on grids).
         let mut pos: Vec<u32> = first[1..].to_vec();
         let n_arcs = acc as usize;
-        let mut heads = vec![0u32; n_arcs];
-        let mut caps = vec![C::ZERO; n_arcs];
+        let mut arcs = vec![
+            ArcRec {
+                hw: 0,
+                cap: C::ZERO
+            };
+            n_arcs
+        ];
         let mut overflow = Vec::new();
         let keep = self.index_edges;
         let mut edge_arc = Vec::with_capacity(if keep { m } else { 0 });
-        // Arc `x` into `head`, whose reverse is arc `y` of `head`'s list.
-        let mut link = |x: u32, y: u32, head: u32, overflow: &mut Vec<(u32, u32)>| {
+        // The head word of arc `x` into `head`, whose reverse is arc `y` of `head`'s list.
+        let link = |x: u32, y: u32, head: u32, overflow: &mut Vec<(u32, u32)>| {
             let rank = y - first[head as usize];
             let hint = if rank < HINT_OVERFLOW {
                 rank
@@ -755,7 +786,7 @@ impl<C: Capacity> Graph<C> {
                 overflow.push((x, y));
                 HINT_OVERFLOW
             };
-            heads[x as usize] = head | (hint << HEAD_BITS);
+            head | (hint << HEAD_BITS)
         };
         for k in 0..m {
             let (i, j, c, r) = edge(k);
@@ -769,10 +800,14 @@ impl<C: Capacity> Graph<C> {
             let a = pos[i as usize];
             pos[j as usize] -= 1;
             let b = pos[j as usize];
-            link(a, b, j, &mut overflow);
-            link(b, a, i, &mut overflow);
-            caps[a as usize] = c;
-            caps[b as usize] = r;
+            arcs[a as usize] = ArcRec {
+                hw: link(a, b, j, &mut overflow),
+                cap: c,
+            };
+            arcs[b as usize] = ArcRec {
+                hw: link(b, a, i, &mut overflow),
+                cap: r,
+            };
             if keep {
                 edge_arc.push(a);
             }
@@ -781,8 +816,7 @@ impl<C: Capacity> Graph<C> {
         overflow.shrink_to_fit();
         self.n_edges = m;
         self.first = first;
-        self.heads = heads;
-        self.caps = caps;
+        self.arcs = arcs;
         self.overflow = overflow;
         self.edge_arc = edge_arc;
         self.trees_valid = false;
@@ -804,7 +838,9 @@ impl<C: Capacity> Graph<C> {
     /// with new capacities: [`Graph::set_edge_caps`], [`Graph::add_tweights`]).
     pub fn reset(&mut self) {
         self.finalize();
-        self.caps.fill(C::ZERO);
+        for arc in &mut self.arcs {
+            arc.cap = C::ZERO;
+        }
         for v in &mut self.nodes {
             v.tr = C::ZERO;
         }
@@ -825,9 +861,9 @@ impl<C: Capacity> Graph<C> {
         let a = self.edge_arc[k];
         if a != NO_ARC {
             let a = a as usize;
-            self.caps[a] = cap;
+            self.arcs[a].cap = cap;
             let s = self.sister(a);
-            self.caps[s] = rev_cap;
+            self.arcs[s].cap = rev_cap;
         }
     }
 
@@ -886,7 +922,7 @@ impl<C: Capacity> Graph<C> {
             return Some((C::ZERO, C::ZERO));
         }
         let a = a as usize;
-        Some((self.caps[a], self.caps[self.sister(a)]))
+        Some((self.arcs[a].cap(), self.arcs[self.sister(a)].cap()))
     }
 
     /// The signed residual terminal capacity of `i` (> 0 source→i, < 0 i→sink).
@@ -986,13 +1022,13 @@ impl<C: Capacity> Graph<C> {
                 // is re-activated: those of the old tree may have to grow into `i`
                 // again once it leaves the new tree.
                 for a in self.first[i] as usize..self.first[i + 1] as usize {
-                    let j = (self.heads[a] & HEAD_MASK) as usize;
+                    let j = (self.arcs[a].hw & HEAD_MASK) as usize;
                     let pj = self.nodes[j].parent;
                     if pj != FREE {
                         self.active.push(j as u32);
                     }
                     if is_arc(pj)
-                        && (self.heads[(pj & !SINK_BIT) as usize] & HEAD_MASK) as usize == i
+                        && (self.arcs[(pj & !SINK_BIT) as usize].hw & HEAD_MASK) as usize == i
                     {
                         self.make_orphan(j as u32);
                     }
@@ -1053,8 +1089,7 @@ impl<C: Capacity> Graph<C> {
     fn grow(&mut self, i: usize) -> u32 {
         // Local slices let the optimiser keep the array pointers in registers.
         let first: &[u32] = &self.first;
-        let heads: &[u32] = &self.heads;
-        let caps: &[C] = &self.caps;
+        let arcs: &[ArcRec<C>] = &self.arcs;
         let overflow: &[(u32, u32)] = &self.overflow;
         let nodes: &mut [Node<C>] = &mut self.nodes;
         let active = &mut self.active;
@@ -1068,10 +1103,10 @@ impl<C: Capacity> Graph<C> {
         if !sink {
             for a in lo..hi {
                 // Residual i→j (sequential in the arc array: checked first).
-                if caps[a] <= C::ZERO {
+                if arcs[a].cap() <= C::ZERO {
                     continue;
                 }
-                let hw = heads[a];
+                let hw = arcs[a].hw;
                 let j = (hw & HEAD_MASK) as usize;
                 let nj = nodes[j];
                 if nj.parent == FREE {
@@ -1088,7 +1123,8 @@ impl<C: Capacity> Graph<C> {
                 }
             }
         } else {
-            for (k, &hw) in heads[lo..hi].iter().enumerate() {
+            for (k, arc) in arcs[lo..hi].iter().enumerate() {
+                let hw = arc.hw;
                 // The residual j→i sits in j's arc list (two random reads: the offset
                 // and the capacity), so the neighbour's state is checked first: most
                 // neighbours of a tree node are in its own tree and need no capacity.
@@ -1101,7 +1137,7 @@ impl<C: Capacity> Graph<C> {
                     continue;
                 }
                 let s = sister_of(first, overflow, a, hw);
-                if caps[s] <= C::ZERO {
+                if arcs[s].cap() <= C::ZERO {
                     continue;
                 }
                 if same_tree {
@@ -1124,17 +1160,16 @@ impl<C: Capacity> Graph<C> {
     /// nearer the terminals, found last, are adopted first).
     fn augment(&mut self, mid: usize) {
         let first: &[u32] = &self.first;
-        let heads: &[u32] = &self.heads;
         let overflow: &[(u32, u32)] = &self.overflow;
-        let caps: &mut [C] = &mut self.caps;
+        let arcs: &mut [ArcRec<C>] = &mut self.arcs;
         let nodes: &mut [Node<C>] = &mut self.nodes;
         let orphans = &mut self.orphans;
-        let sis = |a: usize| sister_of(first, overflow, a, heads[a]);
-        let head = |a: usize| (heads[a] & HEAD_MASK) as usize;
-        let mid_s = sis(mid);
-        let u = head(mid_s);
-        let v = head(mid);
-        let mut f = caps[mid];
+        let sis = |arcs: &[ArcRec<C>], a: usize| sister_of(first, overflow, a, arcs[a].hw);
+        let head = |arcs: &[ArcRec<C>], a: usize| (arcs[a].hw & HEAD_MASK) as usize;
+        let mid_s = sis(arcs, mid);
+        let u = head(arcs, mid_s);
+        let v = head(arcs, mid);
+        let mut f = arcs[mid].cap();
         // Bottleneck: S side (arcs parent → x), then T side (arcs x → parent).
         let mut x = u;
         loop {
@@ -1144,8 +1179,8 @@ impl<C: Capacity> Graph<C> {
                 break;
             }
             let p = p as usize;
-            f = f.min_of(caps[sis(p)]);
-            x = head(p);
+            f = f.min_of(arcs[sis(arcs, p)].cap());
+            x = head(arcs, p);
         }
         x = v;
         loop {
@@ -1155,11 +1190,11 @@ impl<C: Capacity> Graph<C> {
                 break;
             }
             let p = p as usize;
-            f = f.min_of(caps[p]);
-            x = head(p);
+            f = f.min_of(arcs[p].cap());
+            x = head(arcs, p);
         }
-        caps[mid] -= f;
-        caps[mid_s] += f;
+        arcs[mid].cap = arcs[mid].cap() - f;
+        arcs[mid_s].cap = arcs[mid_s].cap() + f;
         x = u;
         loop {
             let p = nodes[x].parent;
@@ -1173,14 +1208,14 @@ impl<C: Capacity> Graph<C> {
                 break;
             }
             let pb = pb as usize;
-            let s = sis(pb);
-            caps[s] -= f;
-            caps[pb] += f;
-            if caps[s] <= C::ZERO {
+            let s = sis(arcs, pb);
+            arcs[s].cap = arcs[s].cap() - f;
+            arcs[pb].cap = arcs[pb].cap() + f;
+            if arcs[s].cap() <= C::ZERO {
                 nodes[x].parent = ORPHAN | (p & SINK_BIT);
                 orphans.push_front(x as u32);
             }
-            x = head(pb);
+            x = head(arcs, pb);
         }
         x = v;
         loop {
@@ -1195,13 +1230,13 @@ impl<C: Capacity> Graph<C> {
                 break;
             }
             let pb = pb as usize;
-            caps[pb] -= f;
-            caps[sis(pb)] += f;
-            if caps[pb] <= C::ZERO {
+            arcs[pb].cap = arcs[pb].cap() - f;
+            arcs[sis(arcs, pb)].cap = arcs[sis(arcs, pb)].cap() + f;
+            if arcs[pb].cap() <= C::ZERO {
                 nodes[x].parent = ORPHAN | (p & SINK_BIT);
                 orphans.push_front(x as u32);
             }
-            x = head(pb);
+            x = head(arcs, pb);
         }
         self.flow += f;
     }
@@ -1224,7 +1259,7 @@ impl<C: Capacity> Graph<C> {
                 if pb == TERMINAL {
                     break;
                 }
-                let q = (self.heads[pb as usize] & HEAD_MASK) as usize;
+                let q = (self.arcs[pb as usize].hw & HEAD_MASK) as usize;
                 assert_eq!(
                     self.nodes[q].parent & SINK_BIT,
                     p & SINK_BIT,
@@ -1249,9 +1284,8 @@ impl<C: Capacity> Graph<C> {
 
     fn process_orphan(&mut self, i: usize) {
         let first: &[u32] = &self.first;
-        let heads: &[u32] = &self.heads;
         let overflow: &[(u32, u32)] = &self.overflow;
-        let caps: &[C] = &self.caps;
+        let arcs: &[ArcRec<C>] = &self.arcs;
         let nodes: &mut [Node<C>] = &mut self.nodes;
         let time = self.time;
         let tree = nodes[i].parent & SINK_BIT;
@@ -1261,15 +1295,15 @@ impl<C: Capacity> Graph<C> {
         // neighbour (T): the direction in which `i` could hang below it.
         let open = |a: usize, hw: u32| {
             if sink {
-                caps[a] > C::ZERO
+                arcs[a].cap() > C::ZERO
             } else {
-                caps[sister_of(first, overflow, a, hw)] > C::ZERO
+                arcs[sister_of(first, overflow, a, hw)].cap() > C::ZERO
             }
         };
         let mut best = FREE;
         let mut best_d = INFINITE_DIST;
         for a in lo..hi {
-            let hw = heads[a];
+            let hw = arcs[a].hw;
             if !open(a, hw) {
                 continue;
             }
@@ -1278,7 +1312,7 @@ impl<C: Capacity> Graph<C> {
             if pj == FREE || pj & SINK_BIT != tree {
                 continue;
             }
-            let d = origin_distance(heads, nodes, time, j);
+            let d = origin_distance(arcs, nodes, time, j);
             if d < best_d {
                 best = a as u32;
                 best_d = d;
@@ -1293,7 +1327,7 @@ impl<C: Capacity> Graph<C> {
         // could grow into it become active.
         nodes[i].parent = FREE;
         for a in lo..hi {
-            let hw = heads[a];
+            let hw = arcs[a].hw;
             let j = (hw & HEAD_MASK) as usize;
             let pj = nodes[j].parent;
             if pj == FREE || pj & SINK_BIT != tree {
@@ -1302,7 +1336,7 @@ impl<C: Capacity> Graph<C> {
             if open(a, hw) {
                 self.active.push(j as u32);
             }
-            if is_arc(pj) && (heads[(pj & !SINK_BIT) as usize] & HEAD_MASK) as usize == i {
+            if is_arc(pj) && (arcs[(pj & !SINK_BIT) as usize].hw & HEAD_MASK) as usize == i {
                 nodes[j].parent = ORPHAN | tree;
                 self.orphans.push_back(j as u32);
             }
@@ -1314,7 +1348,7 @@ impl<C: Capacity> Graph<C> {
 /// the path ends at an orphan. Marks the nodes it verifies with `time`, recording their
 /// distances for later searches.
 #[inline]
-fn origin_distance<C: Capacity>(heads: &[u32], nodes: &mut [Node<C>], time: u32, j: usize) -> u32 {
+fn origin_distance<C: Capacity>(arcs: &[ArcRec<C>], nodes: &mut [Node<C>], time: u32, j: usize) -> u32 {
     let mut d = 0u32;
     let mut k = j;
     loop {
@@ -1332,14 +1366,14 @@ fn origin_distance<C: Capacity>(heads: &[u32], nodes: &mut [Node<C>], time: u32,
         if p == ORPHAN {
             return INFINITE_DIST;
         }
-        k = (heads[p as usize] & HEAD_MASK) as usize;
+        k = (arcs[p as usize].hw & HEAD_MASK) as usize;
     }
     let mut dd = d;
     k = j;
     while ts_of(nodes[k].tsd) != time {
         nodes[k].tsd = pack_tsd(time, dd);
         dd -= 1;
-        k = (heads[(nodes[k].parent & !SINK_BIT) as usize] & HEAD_MASK) as usize;
+        k = (arcs[(nodes[k].parent & !SINK_BIT) as usize].hw & HEAD_MASK) as usize;
     }
     d
 }
@@ -1649,7 +1683,7 @@ mod tests {
         assert_eq!(g.maxflow(), (n - 1) as i64);
         assert!(!g.overflow.is_empty());
         // Every arc's reverse points back to it.
-        for a in 0..g.heads.len() {
+        for a in 0..g.arcs.len() {
             assert_eq!(g.sister(g.sister(a)), a);
         }
     }
