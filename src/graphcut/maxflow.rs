@@ -10,8 +10,9 @@
 //!
 //! Layout (compact, see [`Graph`]): arcs are one array grouped by tail (CSR), built once
 //! from the edge list (right away by a batch [`Graph::add_edges`] on an empty graph,
-//! otherwise on the first solve), stored as a packed `u32` head word plus a residual
-//! capacity; the reverse arc is found from the head's first arc and a 4-bit hint.
+//! otherwise on the first solve), each a record of a packed `u32` head word and its
+//! residual capacity; the reverse arc is found from the head's first arc (kept in the
+//! head's node record) and a 4-bit hint.
 //! Terminal arcs are folded into one signed residual per node (`> 0`: from the source,
 //! `< 0`: to the sink). For a 4-connected grid with `f64` or `i64` capacities this takes
 //! about 68.5 bytes per node (measured by [`Graph::memory_bytes`]).
@@ -156,8 +157,11 @@ impl<C: Copy> ArcRec<C> {
     }
 }
 
-/// Search state of a node: 16 bytes for 8-byte capacities.
+/// A node: its first arc and search state, 20 bytes for 8-byte capacities (packed to
+/// 4-byte alignment). The first arc sits with the state because finding an arc's
+/// reverse needs the head's first arc right when the head's state is read.
 #[derive(Clone, Copy, Debug)]
+#[repr(C, packed(4))]
 struct Node<C> {
     /// Residual terminal capacity: `> 0` from the source, `< 0` to the sink.
     tr: C,
@@ -167,6 +171,8 @@ struct Node<C> {
     /// adoption heuristic. The distance saturates at `u16::MAX`: it only steers
     /// heuristics, the adoption walk never relies on exact values for correctness.
     tsd: u32,
+    /// CSR: the arcs of node `i` are `nodes[i].first..nodes[i + 1].first`.
+    first: u32,
 }
 
 impl<C: Capacity> Default for Node<C> {
@@ -175,6 +181,7 @@ impl<C: Capacity> Default for Node<C> {
             tr: C::ZERO,
             parent: FREE,
             tsd: 0,
+            first: 0,
         }
     }
 }
@@ -203,10 +210,16 @@ fn is_arc(p: u32) -> bool {
 /// Reverse arc of arc `a` whose packed head word is `hw`: the head's first arc plus the
 /// hint, or the overflow table (sorted by arc) when the hint does not fit.
 #[inline(always)]
-fn sister_of(first: &[u32], overflow: &[(u32, u32)], a: usize, hw: u32) -> usize {
+fn sister_of<C: Copy>(nodes: &[Node<C>], overflow: &[(u32, u32)], a: usize, hw: u32) -> usize {
+    sister_at(nodes[(hw & HEAD_MASK) as usize].first, overflow, a, hw)
+}
+
+/// [`sister_of`] given the head's first arc (read by the caller with the head's record).
+#[inline(always)]
+fn sister_at(head_first: u32, overflow: &[(u32, u32)], a: usize, hw: u32) -> usize {
     let h = hw >> HEAD_BITS;
     if h != HINT_OVERFLOW {
-        first[(hw & HEAD_MASK) as usize] as usize + h as usize
+        head_first as usize + h as usize
     } else {
         let k = overflow.partition_point(|&(x, _)| (x as usize) < a);
         overflow[k].1 as usize
@@ -332,20 +345,19 @@ impl ActiveQueue {
 /// [`Graph::set_tweights`]) and `maxflow` called again: it reuses the residual graph
 /// and the search trees.
 ///
-/// Layout (per node `4 + 16` bytes plus 12 per arc for 8-byte capacities, see
-/// [`Graph::memory_bytes`]): arcs are grouped by tail (CSR: `first`), as a packed head
-/// word (`u32`: head node in the low 28 bits, sister hint in the top 4) and a residual
-/// capacity in a separate array. An arc's reverse ("sister") is the arc at
-/// `first[head] + hint`; the few arcs whose sister is the 15th or later arc of its node
-/// keep it in a small overflow table. Nodes are 16-byte records (terminal residual,
-/// parent word with the tree bit, packed time stamp and distance).
+/// Layout (per node 20 bytes plus 12 per arc for 8-byte capacities, see
+/// [`Graph::memory_bytes`]): arcs are grouped by tail (CSR), each a 12-byte record of a
+/// packed head word (`u32`: head node in the low 28 bits, sister hint in the top 4) and
+/// its residual capacity. An arc's reverse ("sister") is the arc at
+/// `head.first + hint`; the few arcs whose sister is the 15th or later arc of its node
+/// keep it in a small overflow table. Nodes are 20-byte records (terminal residual,
+/// parent word with the tree bit, packed time stamp and distance, first arc), plus one
+/// record that ends the last node's arcs.
 #[derive(Clone, Debug)]
 pub struct Graph<C: Capacity> {
     n: usize,
     /// Edges added since the last build: (i, j, cap i→j, cap j→i).
     pending: Vec<(u32, u32, C, C)>,
-    /// CSR: arcs of node `i` are `first[i]..first[i + 1]`.
-    first: Vec<u32>,
     /// Arcs: packed head word and residual capacity.
     arcs: Vec<ArcRec<C>>,
     /// (arc, sister) for arcs with the hint `HINT_OVERFLOW`, sorted by arc.
@@ -400,20 +412,15 @@ impl<C: Capacity> Graph<C> {
         pending
             .try_reserve_exact(edge_hint.min(MAX_ARCS / 2))
             .map_err(|_| oom("edge_hint"))?;
-        let mut first = Vec::new();
-        first
-            .try_reserve_exact(n_nodes + 1)
-            .map_err(|_| oom("n_nodes"))?;
-        first.resize(n_nodes + 1, 0);
+        // One record more than nodes: its `first` ends the last node's arcs.
         let mut nodes = Vec::new();
         nodes
-            .try_reserve_exact(n_nodes)
+            .try_reserve_exact(n_nodes + 1)
             .map_err(|_| oom("n_nodes"))?;
-        nodes.resize(n_nodes, Node::default());
+        nodes.resize(n_nodes + 1, Node::default());
         Ok(Graph {
             n: n_nodes,
             pending,
-            first,
             arcs: Vec::new(),
             overflow: Vec::new(),
             edge_arc: Vec::new(),
@@ -462,15 +469,14 @@ impl<C: Capacity> Graph<C> {
         self.flow
     }
 
-    /// Heap bytes held by the graph: the arc arrays (packed heads, residual
-    /// capacities, sister overflow table), the CSR offsets, the node records, the
+    /// Heap bytes held by the graph: the arc records (packed head word and residual
+    /// capacity), the sister overflow table, the node records (with the CSR offsets), the
     /// active-queue bits and ring, the orphan queue, the changed-node list and bits, and
     /// the optional edge index, terminal capacities and not yet built edges. Computed
     /// from the allocated capacities of these arrays, not from a formula.
     pub fn memory_bytes(&self) -> usize {
         use std::mem::size_of;
-        self.first.capacity() * 4
-            + self.arcs.capacity() * size_of::<ArcRec<C>>()
+        self.arcs.capacity() * size_of::<ArcRec<C>>()
             + self.overflow.capacity() * 8
             + self.edge_arc.capacity() * 4
             + self.pending.capacity() * size_of::<(u32, u32, C, C)>()
@@ -711,7 +717,7 @@ impl<C: Capacity> Graph<C> {
     /// The reverse arc of arc `a`.
     #[inline(always)]
     fn sister(&self, a: usize) -> usize {
-        sister_of(&self.first, &self.overflow, a, self.arcs[a].hw)
+        sister_of(&self.nodes, &self.overflow, a, self.arcs[a].hw)
     }
 
     /// Builds the CSR arc arrays from all edges (keeping residuals of existing arcs).
@@ -731,7 +737,7 @@ impl<C: Capacity> Graph<C> {
         } else {
             // Without an index, recover each built edge from its lower-numbered arc.
             for i in 0..self.n {
-                for a in self.first[i] as usize..self.first[i + 1] as usize {
+                for a in self.nodes[i].first as usize..self.nodes[i + 1].first as usize {
                     let s = self.sister(a);
                     if a < s {
                         let j = self.arcs[a].hw & HEAD_MASK;
@@ -815,7 +821,9 @@ impl<C: Capacity> Graph<C> {
         overflow.sort_unstable();
         overflow.shrink_to_fit();
         self.n_edges = m;
-        self.first = first;
+        for (v, &f) in self.nodes.iter_mut().zip(&first) {
+            v.first = f;
+        }
         self.arcs = arcs;
         self.overflow = overflow;
         self.edge_arc = edge_arc;
@@ -978,11 +986,12 @@ impl<C: Capacity> Graph<C> {
         self.changed.clear();
         for i in 0..self.n {
             let v = &mut self.nodes[i];
-            if v.tr > C::ZERO {
+            let tr = v.tr;
+            if tr > C::ZERO {
                 v.parent = TERMINAL;
                 v.tsd = pack_tsd(0, 1);
                 self.active.mark_initial(i);
-            } else if v.tr < C::ZERO {
+            } else if tr < C::ZERO {
                 v.parent = TERMINAL | SINK_BIT;
                 v.tsd = pack_tsd(0, 1);
                 self.active.mark_initial(i);
@@ -1021,7 +1030,7 @@ impl<C: Capacity> Graph<C> {
                 // Children in the old tree lose their parent, and every tree neighbour
                 // is re-activated: those of the old tree may have to grow into `i`
                 // again once it leaves the new tree.
-                for a in self.first[i] as usize..self.first[i + 1] as usize {
+                for a in self.nodes[i].first as usize..self.nodes[i + 1].first as usize {
                     let j = (self.arcs[a].hw & HEAD_MASK) as usize;
                     let pj = self.nodes[j].parent;
                     if pj != FREE {
@@ -1088,12 +1097,11 @@ impl<C: Capacity> Graph<C> {
     #[inline]
     fn grow(&mut self, i: usize) -> u32 {
         // Local slices let the optimiser keep the array pointers in registers.
-        let first: &[u32] = &self.first;
         let arcs: &[ArcRec<C>] = &self.arcs;
         let overflow: &[(u32, u32)] = &self.overflow;
         let nodes: &mut [Node<C>] = &mut self.nodes;
         let active = &mut self.active;
-        let (lo, hi) = (first[i] as usize, first[i + 1] as usize);
+        let (lo, hi) = (nodes[i].first as usize, nodes[i + 1].first as usize);
         let ni = nodes[i];
         let tree = ni.parent & SINK_BIT;
         let sink = tree != 0;
@@ -1101,16 +1109,17 @@ impl<C: Capacity> Graph<C> {
         let dist_i = dist_of(ni.tsd);
         let child_tsd = pack_tsd(ts_i, dist_i + 1);
         if !sink {
-            for a in lo..hi {
+            for (k, arc) in arcs[lo..hi].iter().enumerate() {
                 // Residual i→j (sequential in the arc array: checked first).
-                if arcs[a].cap() <= C::ZERO {
+                if arc.cap() <= C::ZERO {
                     continue;
                 }
-                let hw = arcs[a].hw;
+                let a = lo + k;
+                let hw = arc.hw;
                 let j = (hw & HEAD_MASK) as usize;
                 let nj = nodes[j];
                 if nj.parent == FREE {
-                    let s = sister_of(first, overflow, a, hw);
+                    let s = sister_at(nj.first, overflow, a, hw);
                     nodes[j].parent = s as u32 | tree;
                     nodes[j].tsd = child_tsd;
                     active.push(j as u32);
@@ -1118,16 +1127,16 @@ impl<C: Capacity> Graph<C> {
                     return a as u32;
                 } else if ts_of(nj.tsd) <= ts_i && dist_of(nj.tsd) > dist_i {
                     // Shortcut: `i` gives `j` a shorter, as fresh path to the root.
-                    nodes[j].parent = sister_of(first, overflow, a, hw) as u32 | tree;
+                    nodes[j].parent = sister_at(nj.first, overflow, a, hw) as u32 | tree;
                     nodes[j].tsd = child_tsd;
                 }
             }
         } else {
             for (k, arc) in arcs[lo..hi].iter().enumerate() {
                 let hw = arc.hw;
-                // The residual j→i sits in j's arc list (two random reads: the offset
-                // and the capacity), so the neighbour's state is checked first: most
-                // neighbours of a tree node are in its own tree and need no capacity.
+                // The residual j→i sits in j's arc list (a random read), so the
+                // neighbour's state is checked first: most neighbours of a tree node
+                // are in its own tree and need no capacity.
                 let a = lo + k;
                 let j = (hw & HEAD_MASK) as usize;
                 let nj = nodes[j];
@@ -1136,7 +1145,7 @@ impl<C: Capacity> Graph<C> {
                 if same_tree && !shortcut {
                     continue;
                 }
-                let s = sister_of(first, overflow, a, hw);
+                let s = sister_at(nj.first, overflow, a, hw);
                 if arcs[s].cap() <= C::ZERO {
                     continue;
                 }
@@ -1159,14 +1168,15 @@ impl<C: Capacity> Graph<C> {
     /// nodes whose tree arc saturates become orphans (queued at the front, so those
     /// nearer the terminals, found last, are adopted first).
     fn augment(&mut self, mid: usize) {
-        let first: &[u32] = &self.first;
         let overflow: &[(u32, u32)] = &self.overflow;
         let arcs: &mut [ArcRec<C>] = &mut self.arcs;
         let nodes: &mut [Node<C>] = &mut self.nodes;
         let orphans = &mut self.orphans;
-        let sis = |arcs: &[ArcRec<C>], a: usize| sister_of(first, overflow, a, arcs[a].hw);
+        let sis = |arcs: &[ArcRec<C>], nodes: &[Node<C>], a: usize| {
+            sister_of(nodes, overflow, a, arcs[a].hw)
+        };
         let head = |arcs: &[ArcRec<C>], a: usize| (arcs[a].hw & HEAD_MASK) as usize;
-        let mid_s = sis(arcs, mid);
+        let mid_s = sis(arcs, nodes, mid);
         let u = head(arcs, mid_s);
         let v = head(arcs, mid);
         let mut f = arcs[mid].cap();
@@ -1179,7 +1189,7 @@ impl<C: Capacity> Graph<C> {
                 break;
             }
             let p = p as usize;
-            f = f.min_of(arcs[sis(arcs, p)].cap());
+            f = f.min_of(arcs[sis(arcs, nodes, p)].cap());
             x = head(arcs, p);
         }
         x = v;
@@ -1200,15 +1210,16 @@ impl<C: Capacity> Graph<C> {
             let p = nodes[x].parent;
             let pb = p & !SINK_BIT;
             if pb == TERMINAL {
-                nodes[x].tr -= f;
-                if nodes[x].tr <= C::ZERO {
+                let tr = nodes[x].tr - f;
+                nodes[x].tr = tr;
+                if tr <= C::ZERO {
                     nodes[x].parent = ORPHAN | (p & SINK_BIT);
                     orphans.push_front(x as u32);
                 }
                 break;
             }
             let pb = pb as usize;
-            let s = sis(arcs, pb);
+            let s = sis(arcs, nodes, pb);
             arcs[s].cap = arcs[s].cap() - f;
             arcs[pb].cap = arcs[pb].cap() + f;
             if arcs[s].cap() <= C::ZERO {
@@ -1222,8 +1233,9 @@ impl<C: Capacity> Graph<C> {
             let p = nodes[x].parent;
             let pb = p & !SINK_BIT;
             if pb == TERMINAL {
-                nodes[x].tr += f;
-                if nodes[x].tr >= C::ZERO {
+                let tr = nodes[x].tr + f;
+                nodes[x].tr = tr;
+                if tr >= C::ZERO {
                     nodes[x].parent = ORPHAN | (p & SINK_BIT);
                     orphans.push_front(x as u32);
                 }
@@ -1231,7 +1243,7 @@ impl<C: Capacity> Graph<C> {
             }
             let pb = pb as usize;
             arcs[pb].cap = arcs[pb].cap() - f;
-            arcs[sis(arcs, pb)].cap = arcs[sis(arcs, pb)].cap() + f;
+            arcs[sis(arcs, nodes, pb)].cap = arcs[sis(arcs, nodes, pb)].cap() + f;
             if arcs[pb].cap() <= C::ZERO {
                 nodes[x].parent = ORPHAN | (p & SINK_BIT);
                 orphans.push_front(x as u32);
@@ -1283,33 +1295,29 @@ impl<C: Capacity> Graph<C> {
     }
 
     fn process_orphan(&mut self, i: usize) {
-        let first: &[u32] = &self.first;
         let overflow: &[(u32, u32)] = &self.overflow;
         let arcs: &[ArcRec<C>] = &self.arcs;
         let nodes: &mut [Node<C>] = &mut self.nodes;
         let time = self.time;
         let tree = nodes[i].parent & SINK_BIT;
         let sink = tree != 0;
-        let (lo, hi) = (first[i] as usize, first[i + 1] as usize);
-        // Residual capacity from the neighbour towards `i` (S) or from `i` towards the
-        // neighbour (T): the direction in which `i` could hang below it.
-        let open = |a: usize, hw: u32| {
+        let (lo, hi) = (nodes[i].first as usize, nodes[i + 1].first as usize);
+        // Residual capacity from the neighbour `j` towards `i` (S) or from `i` towards
+        // `j` (T): the direction in which `i` could hang below it.
+        let open = |a: usize, hw: u32, j_first: u32| {
             if sink {
                 arcs[a].cap() > C::ZERO
             } else {
-                arcs[sister_of(first, overflow, a, hw)].cap() > C::ZERO
+                arcs[sister_at(j_first, overflow, a, hw)].cap() > C::ZERO
             }
         };
         let mut best = FREE;
         let mut best_d = INFINITE_DIST;
         for a in lo..hi {
             let hw = arcs[a].hw;
-            if !open(a, hw) {
-                continue;
-            }
             let j = (hw & HEAD_MASK) as usize;
-            let pj = nodes[j].parent;
-            if pj == FREE || pj & SINK_BIT != tree {
+            let nj = nodes[j];
+            if nj.parent == FREE || nj.parent & SINK_BIT != tree || !open(a, hw, nj.first) {
                 continue;
             }
             let d = origin_distance(arcs, nodes, time, j);
@@ -1329,11 +1337,12 @@ impl<C: Capacity> Graph<C> {
         for a in lo..hi {
             let hw = arcs[a].hw;
             let j = (hw & HEAD_MASK) as usize;
-            let pj = nodes[j].parent;
+            let nj = nodes[j];
+            let pj = nj.parent;
             if pj == FREE || pj & SINK_BIT != tree {
                 continue;
             }
-            if open(a, hw) {
+            if open(a, hw, nj.first) {
                 self.active.push(j as u32);
             }
             if is_arc(pj) && (arcs[(pj & !SINK_BIT) as usize].hw & HEAD_MASK) as usize == i {
@@ -1348,7 +1357,12 @@ impl<C: Capacity> Graph<C> {
 /// the path ends at an orphan. Marks the nodes it verifies with `time`, recording their
 /// distances for later searches.
 #[inline]
-fn origin_distance<C: Capacity>(arcs: &[ArcRec<C>], nodes: &mut [Node<C>], time: u32, j: usize) -> u32 {
+fn origin_distance<C: Capacity>(
+    arcs: &[ArcRec<C>],
+    nodes: &mut [Node<C>],
+    time: u32,
+    j: usize,
+) -> u32 {
     let mut d = 0u32;
     let mut k = j;
     loop {
