@@ -18,6 +18,21 @@ pub struct DepthView<'a> {
     pub height: usize,
 }
 
+/// Index of the first negative or infinite value. Serial on purpose (a frame takes tens
+/// of microseconds, less than waking the thread pool) and in branch-free chunks, so
+/// that the scan vectorises; only a chunk with a bad value is searched.
+fn first_bad_depth(data: &[f32]) -> Option<usize> {
+    const CHUNK: usize = 512;
+    let bad = |z: f32| z.is_infinite() | (z < 0.0);
+    data.chunks(CHUNK).enumerate().find_map(|(c, chunk)| {
+        if chunk.iter().fold(false, |acc, &z| acc | bad(z)) {
+            chunk.iter().position(|&z| bad(z)).map(|k| c * CHUNK + k)
+        } else {
+            None
+        }
+    })
+}
+
 impl<'a> DepthView<'a> {
     /// Wraps a slice after checking its size and values: negative or infinite depth is
     /// an error (NaN and 0 mean "no reading").
@@ -32,10 +47,7 @@ impl<'a> DepthView<'a> {
                 height * width
             )
         })?;
-        if let Some(bad) = data
-            .par_iter()
-            .position_any(|&z| z.is_infinite() || z < 0.0)
-        {
+        if let Some(bad) = first_bad_depth(data) {
             return Err(Error::invalid(
                 name,
                 format!(
@@ -62,7 +74,7 @@ impl<'a> DepthView<'a> {
 
     /// Number of pixels with a reading.
     pub fn count_valid(&self) -> usize {
-        self.data.par_iter().filter(|&&z| z > 0.0).count()
+        self.data.iter().filter(|&&z| z > 0.0).count()
     }
 }
 
@@ -755,6 +767,26 @@ fn graph_into<const EIGHT: bool>(cloud: &Cloud, graph: &mut PixelGraph) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn first_bad_depth_finds_the_first_bad_value_across_chunks() {
+        let n = 3 * 512 + 7;
+        let clean: Vec<f32> = (0..n).map(|k| (k % 5) as f32 * 0.5).collect();
+        assert_eq!(first_bad_depth(&clean), None);
+        let mut with_nan = clean.clone();
+        with_nan[3] = f32::NAN; // NaN means "no reading", not an error
+        assert_eq!(first_bad_depth(&with_nan), None);
+        for &first in &[0, 1, 511, 512, 513, 1024, n - 1] {
+            for bad in [-0.001f32, f32::INFINITY, f32::NEG_INFINITY] {
+                let mut d = clean.clone();
+                d[first] = bad;
+                if first + 600 < n {
+                    d[first + 600] = -1.0; // a later bad value does not win
+                }
+                assert_eq!(first_bad_depth(&d), Some(first), "bad {bad} at {first}");
+            }
+        }
+    }
 
     fn cam() -> Camera {
         Camera::new(300.0, 300.0, 79.5, 59.5, 160, 120).unwrap()

@@ -67,7 +67,12 @@ macro_rules! convert_from {
             if dt.is_equiv_to(&numpy::dtype::<$t>(py)) {
                 let a = $arr.cast::<PyArrayDyn<$t>>().expect("dtype checked");
                 let ro = a.readonly();
-                return Ok(ro.as_array().iter().map(|&v| v as $out).collect());
+                // Contiguous input (the usual case) converts as a slice: the n-D element
+                // iterator costs about 10 ns per element, 1.5 ms for two 320×240 images.
+                return Ok(match ro.as_slice() {
+                    Ok(v) => v.iter().map(|&v| v as $out).collect(),
+                    Err(_) => ro.as_array().iter().map(|&v| v as $out).collect(),
+                });
             }
         )*
         Err(err($name, format!("unsupported dtype {dt}")))
@@ -150,7 +155,10 @@ pub fn bool_array(obj: &Bound<PyAny>, name: &str, shape: &[usize]) -> PyResult<V
     if arr.dtype().is_equiv_to(&numpy::dtype::<bool>(arr.py())) {
         let a = arr.cast::<PyArrayDyn<bool>>().expect("dtype checked");
         let ro = a.readonly();
-        return Ok(ro.as_array().iter().copied().collect());
+        return Ok(match ro.as_slice() {
+            Ok(v) => v.to_vec(),
+            Err(_) => ro.as_array().iter().copied().collect(),
+        });
     }
     Ok(to_i64(arr, name)
         .map_err(|_| {
