@@ -209,7 +209,8 @@ pub struct EmResult {
     pub labels: Vec<i32>,
     /// Final energy.
     pub energy: f64,
-    /// Energy after the initial E-step and after every M- and E-step (non-increasing).
+    /// Energy after the initial E-step and after every M- and E-step (non-increasing;
+    /// while τ anneals, an M-step's entry is already at the next E-step's τ).
     pub energy_trace: Vec<f64>,
     pub iterations: usize,
     pub termination: EmTermination,
@@ -452,20 +453,23 @@ pub fn hard_em(
             lm.minimize(&mut with_prior, &mut new_pose)
         };
         let pose_moved = report.accepted > 0;
+        // Anneal τ: every unary term can only drop. The unary terms for the moved pose
+        // are computed once, at the next τ: E(new pose, next τ) ≤ E(new pose, τ) ≤
+        // E(pose, τ), so the energy still never increases (checked, not assumed).
+        let next_tau = config.outlier_distance_at(iterations);
         if pose_moved {
-            unary_costs(model, points, &new_pose, config, tau, &mut unary);
+            unary_costs(model, points, &new_pose, config, next_tau, &mut unary);
             let e = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&new_pose);
             if e <= energy {
                 pose = new_pose;
                 energy = e;
+                tau = next_tau;
             } else {
                 // Cannot happen in exact arithmetic; keep the better state.
                 unary_costs(model, points, &pose, config, tau, &mut unary);
             }
             trace.push(energy);
         }
-        // Anneal τ: every unary term can only drop.
-        let next_tau = config.outlier_distance_at(iterations);
         if next_tau != tau {
             tau = next_tau;
             unary_costs(model, points, &pose, config, tau, &mut unary);
