@@ -123,6 +123,8 @@ struct Checked<'a, C: Cost> {
     weights: &'a [C],
     /// L×L pairwise values (Potts filled in when none was given).
     v: Vec<C>,
+    /// V is Potts (1 off the diagonal): a pair's cost is just its edge weight.
+    potts: bool,
     /// Stand-in for a forbidden unary inside the graph: more than any finite energy.
     big: C,
     /// Labels allowed at some node.
@@ -229,6 +231,8 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
         }
     }
     let big = forbidden_stand_in(p.unary, l, p.weights, &v)?;
+    let one = C::from_i32(1);
+    let potts = (0..l * l).all(|k| v[k] == if k / l == k % l { C::ZERO } else { one });
     Ok(Checked {
         n,
         l,
@@ -236,6 +240,7 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
         edges: p.edges,
         weights: p.weights,
         v,
+        potts,
         big,
         allowed_somewhere,
     })
@@ -347,6 +352,9 @@ impl<C: Cost> Checked<'_, C> {
     fn pair(&self, k: usize, a: i32, b: i32) -> C {
         if a == b {
             return C::ZERO;
+        }
+        if self.potts {
+            return self.weights[k];
         }
         let v = self.v[a as usize * self.l + b as usize];
         // Checked at set-up not to overflow (weights × max V fit when costs do).
@@ -489,8 +497,9 @@ pub struct CrfSolver<C: Cost> {
     /// Per-node move costs for "keep" (x = 0, source side) and "switch" (x = 1).
     e0: Vec<C>,
     e1: Vec<C>,
-    /// Per node: the most its edges can gain when it switches (see `expansion_move`).
-    slack: Vec<C>,
+    /// Per node: the sum of its edges' weights, `None` on overflow (see
+    /// `expansion_move`).
+    incident_weight: Vec<Option<C>>,
     /// Per node: provably keeps its label in the optimal move, left out of the cut.
     fixed: Vec<bool>,
     /// Whether expansion moves leave provably fixed nodes out of the cut.
@@ -526,7 +535,7 @@ impl<C: Cost> CrfSolver<C> {
             edges: edges.to_vec(),
             e0: vec![C::ZERO; n_nodes],
             e1: vec![C::ZERO; n_nodes],
-            slack: vec![C::ZERO; n_nodes],
+            incident_weight: vec![None; n_nodes],
             fixed: vec![false; n_nodes],
             prune: true,
             candidate: vec![0; n_nodes],
@@ -566,6 +575,17 @@ impl<C: Cost> CrfSolver<C> {
     ) -> Result<Labelling<C>> {
         let c = self.check(problem, true)?;
         let mut labels = c.check_init(init)?;
+        if self.prune {
+            self.incident_weight.fill(Some(C::ZERO));
+            for (&[i, j], &w) in c.edges.iter().zip(c.weights) {
+                if i != j {
+                    for x in [i as usize, j as usize] {
+                        self.incident_weight[x] =
+                            self.incident_weight[x].and_then(|s| s.checked_add(w));
+                    }
+                }
+            }
+        }
         let mut e = c.energy(&labels);
         let mut trace = vec![e.value()];
         // `version` counts accepted moves; a label whose move failed at the current
@@ -622,21 +642,21 @@ impl<C: Cost> CrfSolver<C> {
         // Pruning (exact). Take any optimal move in which node i (label f_i ≠ α) switches
         // to α and switch i back: its unary term drops by U_i(α) − U_i(f_i), and each
         // edge term w·V(α, x_j) becomes w·V(f_i, x_j) ≤ w·V(f_i, α) + w·V(α, x_j)
-        // (triangle inequality), so the edges rise by at most slack_i = Σ_j w_ij·V(f_i, α).
+        // (triangle inequality), so the edges rise by at most slack_i = Σ_j w_ij·V(f_i, α)
+        // = V(f_i, α)·W_i with W_i the sum of i's edge weights (computed once per call).
         // Where U_i(α) − U_i(f_i) > slack_i that would lower an optimal energy, so i keeps
         // f_i in every optimal move and can be left out of the cut. On the EM's body
         // parts this removes most nodes from most moves (points far from segment α).
         if self.prune {
-            self.slack.fill(C::ZERO);
-            for (k, &[i, j]) in c.edges.iter().enumerate() {
-                let (i, j) = (i as usize, j as usize);
-                if i != j {
-                    self.slack[i] += c.pair(k, labels[i], alpha);
-                    self.slack[j] += c.pair(k, labels[j], alpha);
-                }
-            }
             for i in 0..c.n {
-                self.fixed[i] = labels[i] != alpha && self.e1[i] - self.e0[i] > self.slack[i];
+                let fi = labels[i];
+                self.fixed[i] = fi != alpha && {
+                    let v = c.v[fi as usize * c.l + a];
+                    match self.incident_weight[i].and_then(|w| w.mul(v)) {
+                        Some(slack) => self.e1[i] - self.e0[i] > slack,
+                        None => false, // overflow: no pruning for this node
+                    }
+                };
             }
         }
         let prune = self.prune;
