@@ -500,8 +500,19 @@ pub struct CrfSolver<C: Cost> {
     /// Per node: the sum of its edges' weights, `None` on overflow (see
     /// `expansion_move`).
     incident_weight: Vec<Option<C>>,
-    /// Per node: provably keeps its label in the optimal move, left out of the cut.
-    fixed: Vec<bool>,
+    /// Per node, in the current expansion move: may switch to α (not labelled α, not
+    /// pruned). Only free nodes are in the cut.
+    is_free: Vec<bool>,
+    /// The free nodes of the current move, ascending; then those that switched.
+    free: Vec<u32>,
+    /// Node → incident edges (CSR, ascending edge index, self-loops left out).
+    adj_start: Vec<u32>,
+    adj: Vec<u32>,
+    /// Edges and nodes given capacities since the graph was last cleared, and whether
+    /// that list is complete (a swap move clears the whole graph instead).
+    touched_edges: Vec<u32>,
+    touched_nodes: Vec<u32>,
+    touched_valid: bool,
     /// Whether expansion moves leave provably fixed nodes out of the cut.
     prune: bool,
     candidate: Vec<i32>,
@@ -530,13 +541,39 @@ impl<C: Cost> CrfSolver<C> {
             graph.add_edge(i as usize, j as usize, C::ZERO, C::ZERO)?;
         }
         graph.finalize();
+        let mut adj_start = vec![0u32; n_nodes + 1];
+        for &[i, j] in edges {
+            if i != j {
+                adj_start[i as usize + 1] += 1;
+                adj_start[j as usize + 1] += 1;
+            }
+        }
+        for i in 0..n_nodes {
+            adj_start[i + 1] += adj_start[i];
+        }
+        let mut pos = adj_start.clone();
+        let mut adj = vec![0u32; adj_start[n_nodes] as usize];
+        for (k, &[i, j]) in edges.iter().enumerate() {
+            if i != j {
+                for x in [i as usize, j as usize] {
+                    adj[pos[x] as usize] = k as u32;
+                    pos[x] += 1;
+                }
+            }
+        }
         Ok(CrfSolver {
             graph,
             edges: edges.to_vec(),
             e0: vec![C::ZERO; n_nodes],
             e1: vec![C::ZERO; n_nodes],
             incident_weight: vec![None; n_nodes],
-            fixed: vec![false; n_nodes],
+            is_free: vec![false; n_nodes],
+            free: Vec::new(),
+            adj_start,
+            adj,
+            touched_edges: Vec::new(),
+            touched_nodes: Vec::new(),
+            touched_valid: true,
             prune: true,
             candidate: vec![0; n_nodes],
         })
@@ -575,17 +612,7 @@ impl<C: Cost> CrfSolver<C> {
     ) -> Result<Labelling<C>> {
         let c = self.check(problem, true)?;
         let mut labels = c.check_init(init)?;
-        if self.prune {
-            self.incident_weight.fill(Some(C::ZERO));
-            for (&[i, j], &w) in c.edges.iter().zip(c.weights) {
-                if i != j {
-                    for x in [i as usize, j as usize] {
-                        self.incident_weight[x] =
-                            self.incident_weight[x].and_then(|s| s.checked_add(w));
-                    }
-                }
-            }
-        }
+        self.prepare_expansion(&c);
         let mut e = c.energy(&labels);
         let mut trace = vec![e.value()];
         // `version` counts accepted moves; a label whose move failed at the current
@@ -601,7 +628,7 @@ impl<C: Cost> CrfSolver<C> {
                     continue;
                 }
                 tried += 1;
-                let new_e = self.expansion_move(&c, &labels, alpha as i32);
+                let new_e = self.expansion_move(&c, &labels, alpha as i32, &e);
                 if new_e.lt(&e) {
                     std::mem::swap(&mut labels, &mut self.candidate);
                     e = new_e;
@@ -616,29 +643,56 @@ impl<C: Cost> CrfSolver<C> {
                 break;
             }
         }
+        // The moves update the energy by differences; the result is summed afresh so
+        // that it equals `energy(labels)` exactly (floats may differ in the last bits
+        // from the running value, which the trace keeps).
+        let energy = c.energy(&labels).value();
         Ok(Labelling {
             labels,
-            energy: e.value(),
+            energy,
             trace,
             cycles,
             moves_tried: tried,
         })
     }
 
-    /// Builds and solves the expansion move of `alpha` from `labels`; leaves the moved
-    /// labelling in `self.candidate` and returns its energy.
-    fn expansion_move(&mut self, c: &Checked<C>, labels: &[i32], alpha: i32) -> Energy<C> {
-        let a = alpha as usize;
-        self.graph.reset();
-        for i in 0..c.n {
-            let cur = c.u_graph(i, labels[i] as usize);
-            self.e0[i] = cur;
-            self.e1[i] = if labels[i] == alpha {
-                cur
-            } else {
-                c.u_graph(i, a)
-            };
+    /// Per-problem set-up of the expansion moves: each node's sum of edge weights.
+    fn prepare_expansion(&mut self, c: &Checked<C>) {
+        self.incident_weight.fill(Some(C::ZERO));
+        for (&[i, j], &w) in c.edges.iter().zip(c.weights) {
+            if i != j {
+                for x in [i as usize, j as usize] {
+                    self.incident_weight[x] =
+                        self.incident_weight[x].and_then(|s| s.checked_add(w));
+                }
+            }
         }
+    }
+
+    /// Builds and solves the expansion move of `alpha` from `labels`, whose energy is
+    /// `e`; leaves the moved labelling in `self.candidate` and returns its energy.
+    ///
+    /// Only the free nodes (see below) and their edges are visited: the move costs
+    /// O(N) for the unary terms plus work proportional to the free nodes' edges, not a
+    /// pass over every edge. The new energy is `e` plus the change on the nodes that
+    /// switched and their edges.
+    fn expansion_move(
+        &mut self,
+        c: &Checked<C>,
+        labels: &[i32],
+        alpha: i32,
+        e: &Energy<C>,
+    ) -> Energy<C> {
+        let a = alpha as usize;
+        if self.touched_valid {
+            self.graph
+                .reset_touched(&self.touched_edges, &self.touched_nodes);
+        } else {
+            self.graph.reset();
+        }
+        self.touched_edges.clear();
+        self.touched_nodes.clear();
+        self.touched_valid = true;
         // Pruning (exact). Take any optimal move in which node i (label f_i ≠ α) switches
         // to α and switch i back: its unary term drops by U_i(α) − U_i(f_i), and each
         // edge term w·V(α, x_j) becomes w·V(f_i, x_j) ≤ w·V(f_i, α) + w·V(α, x_j)
@@ -647,84 +701,129 @@ impl<C: Cost> CrfSolver<C> {
         // Where U_i(α) − U_i(f_i) > slack_i that would lower an optimal energy, so i keeps
         // f_i in every optimal move and can be left out of the cut. On the EM's body
         // parts this removes most nodes from most moves (points far from segment α).
-        if self.prune {
-            for i in 0..c.n {
-                let fi = labels[i];
-                self.fixed[i] = fi != alpha && {
-                    let v = c.v[fi as usize * c.l + a];
-                    match self.incident_weight[i].and_then(|w| w.mul(v)) {
-                        Some(slack) => self.e1[i] - self.e0[i] > slack,
-                        None => false, // overflow: no pruning for this node
-                    }
-                };
-            }
-        }
-        let prune = self.prune;
-        for (k, &[i, j]) in c.edges.iter().enumerate() {
-            let (i, j) = (i as usize, j as usize);
-            let (fi, fj) = (labels[i], labels[j]);
-            if i == j || fi == alpha && fj == alpha {
+        // The nodes left, not labelled α, are the free ones.
+        self.free.clear();
+        for i in 0..c.n {
+            let fi = labels[i];
+            if fi == alpha {
+                self.is_free[i] = false;
                 continue;
             }
-            let (xi, xj) = if prune {
-                (self.fixed[i], self.fixed[j])
-            } else {
-                (false, false)
-            };
-            if xi && xj {
-                continue; // a constant of this move
-            }
-            if fi == alpha {
-                // x_j = 0 keeps (α, f_j); x_j = 1 gives (α, α) = 0.
-                if !xj {
-                    self.e0[j] += c.pair(k, alpha, fj);
-                }
-            } else if fj == alpha {
-                if !xi {
-                    self.e0[i] += c.pair(k, fi, alpha);
-                }
-            } else if xi {
-                // x_i = 0 for sure: A = E(0,0) or B = E(0,1) by x_j.
-                self.e0[j] += c.pair(k, fi, fj);
-                self.e1[j] += c.pair(k, fi, alpha);
-            } else if xj {
-                // x_j = 0 for sure: A or C = E(1,0) by x_i.
-                self.e0[i] += c.pair(k, fi, fj);
-                self.e1[i] += c.pair(k, alpha, fj);
-            } else {
-                let ea = c.pair(k, fi, fj);
-                let eb = c.pair(k, fi, alpha);
-                let ec = c.pair(k, alpha, fj);
-                self.e0[i] += ea;
-                self.e1[i] += ec;
-                self.e0[j] += ec;
-                // B + C − A − D with D = 0: ≥ 0 by the triangle inequality (clamped
-                // against float rounding).
-                let mut cap = eb + ec - ea;
-                if cap < C::ZERO {
-                    cap = C::ZERO;
-                }
-                self.graph.set_edge_caps_unchecked(k, cap, C::ZERO);
+            let cur = c.u_graph(i, fi as usize);
+            let switch = c.u_graph(i, a);
+            self.e0[i] = cur;
+            self.e1[i] = switch;
+            let fixed = self.prune
+                && match self.incident_weight[i].and_then(|w| w.mul(c.v[fi as usize * c.l + a])) {
+                    Some(slack) => switch - cur > slack,
+                    None => false, // overflow: no pruning for this node
+                };
+            self.is_free[i] = !fixed;
+            if !fixed {
+                self.free.push(i as u32);
             }
         }
-        for i in 0..c.n {
-            if labels[i] != alpha && !(prune && self.fixed[i]) {
-                let (x0, x1) = (self.e0[i], self.e1[i]);
-                let m = x0.min_of(x1);
-                // Source side (x = 0, keep) pays the sink arc and vice versa.
-                self.graph.update_tweights_unchecked(i, x1 - m, x0 - m);
+        // Edge terms, x = 1 meaning "switch to α", fixed nodes at x = 0 and α nodes at
+        // α either way. Each free node adds its own terms, edge by edge in ascending
+        // order; an edge between two free nodes gets its capacity from its first end.
+        for &iu in &self.free {
+            let i = iu as usize;
+            let (lo, hi) = (self.adj_start[i] as usize, self.adj_start[i + 1] as usize);
+            for &ku in &self.adj[lo..hi] {
+                let k = ku as usize;
+                let [p, q] = c.edges[k];
+                let (p, q) = (p as usize, q as usize);
+                let (fp, fq) = (labels[p], labels[q]);
+                let i_is_p = p == i;
+                let other = if i_is_p { q } else { p };
+                if labels[other] == alpha {
+                    // x_i = 0 keeps (f_i, α); x_i = 1 gives (α, α) = 0.
+                    self.e0[i] += if i_is_p {
+                        c.pair(k, fp, alpha)
+                    } else {
+                        c.pair(k, alpha, fq)
+                    };
+                } else if !self.is_free[other] {
+                    // The other end stays: (f_p, f_q) or i's side at α.
+                    self.e0[i] += c.pair(k, fp, fq);
+                    self.e1[i] += if i_is_p {
+                        c.pair(k, alpha, fq)
+                    } else {
+                        c.pair(k, fp, alpha)
+                    };
+                } else {
+                    // Both free: E(0,0) = A, E(0,1) = B, E(1,0) = C, E(1,1) = 0; p pays
+                    // A or C by x_p, q pays C for x_q = 0 and p→q carries B + C − A.
+                    let ea = c.pair(k, fp, fq);
+                    let ec = c.pair(k, alpha, fq);
+                    if i_is_p {
+                        self.e0[i] += ea;
+                        self.e1[i] += ec;
+                        let eb = c.pair(k, fp, alpha);
+                        // ≥ 0 by the triangle inequality (clamped against float rounding).
+                        let mut cap = eb + ec - ea;
+                        if cap < C::ZERO {
+                            cap = C::ZERO;
+                        }
+                        self.graph.set_edge_caps_unchecked(k, cap, C::ZERO);
+                        self.touched_edges.push(ku);
+                    } else {
+                        self.e0[i] += ec;
+                    }
+                }
             }
         }
+        for &iu in &self.free {
+            let i = iu as usize;
+            let (x0, x1) = (self.e0[i], self.e1[i]);
+            let m = x0.min_of(x1);
+            // Source side (x = 0, keep) pays the sink arc and vice versa.
+            self.graph.update_tweights_unchecked(i, x1 - m, x0 - m);
+        }
+        self.touched_nodes.extend_from_slice(&self.free);
         self.graph.maxflow();
-        for i in 0..c.n {
-            let keep = labels[i] == alpha || prune && self.fixed[i];
-            self.candidate[i] = if !keep && self.graph.is_sink_side(i) {
-                alpha
-            } else {
-                labels[i]
-            };
+        // The switched nodes: free and on the sink side.
+        self.candidate.copy_from_slice(labels);
+        let graph = &self.graph;
+        self.free.retain(|&i| graph.is_sink_side(i as usize));
+        for &i in &self.free {
+            self.candidate[i as usize] = alpha;
         }
-        c.energy(&self.candidate)
+        // The energy change: unary terms of the switched nodes, then every edge with a
+        // switched end once (from its first end when both switched).
+        let mut forbidden = e.forbidden as isize;
+        let mut sum = e.sum;
+        for &iu in &self.free {
+            let i = iu as usize;
+            let old = c.u(i, labels[i] as usize);
+            let new = c.u(i, a);
+            if old == C::FORBIDDEN {
+                forbidden -= 1;
+            } else {
+                sum -= old;
+            }
+            if new == C::FORBIDDEN {
+                forbidden += 1;
+            } else {
+                sum += new;
+            }
+            let (lo, hi) = (self.adj_start[i] as usize, self.adj_start[i + 1] as usize);
+            for &ku in &self.adj[lo..hi] {
+                let k = ku as usize;
+                let [p, q] = c.edges[k];
+                let (p, q) = (p as usize, q as usize);
+                let other = if p == i { q } else { p };
+                if self.candidate[other] != labels[other] && p != i {
+                    continue; // both switched: counted from p
+                }
+                sum += c.pair(k, self.candidate[p], self.candidate[q]);
+                sum -= c.pair(k, labels[p], labels[q]);
+            }
+        }
+        Energy {
+            forbidden: forbidden as usize,
+            sum,
+        }
     }
 
     /// Alpha-beta swap: for each pair of labels (α, β), the nodes labelled α or β may
@@ -790,6 +889,8 @@ impl<C: Cost> CrfSolver<C> {
         let (a, b) = (alpha as usize, beta as usize);
         let in_set = |x: i32| x == alpha || x == beta;
         self.graph.reset();
+        // Swap moves set capacities anywhere: the next expansion move clears it all.
+        self.touched_valid = false;
         for i in 0..c.n {
             if in_set(labels[i]) {
                 self.e0[i] = c.u_graph(i, a);
@@ -1167,14 +1268,22 @@ mod tests {
             let labels: Vec<i32> = (0..n)
                 .map(|i| ((seed as usize / (i + 1) + i * 7) % p.l) as i32)
                 .collect();
-            let alpha = (seed as usize % p.l) as i32;
             let c = check_problem(&v, true).unwrap();
-            let best = best_move(&v, &labels, alpha);
+            let e0 = c.energy(&labels);
+            // One solver for every move in turn: the graph is cleared only where the
+            // previous move touched it.
             let mut s = CrfSolver::new(n, &p.edges).unwrap();
-            for prune in [true, false] {
-                s.set_pruning(prune);
-                let e = s.expansion_move(&c, &labels, alpha);
-                prop_assert_eq!(e.value(), best, "prune {}", prune);
+            s.prepare_expansion(&c);
+            for k in 0..2 * p.l {
+                let alpha = ((seed as usize + k) % p.l) as i32;
+                let best = best_move(&v, &labels, alpha);
+                for prune in [true, false] {
+                    s.set_pruning(prune);
+                    let e = s.expansion_move(&c, &labels, alpha, &e0);
+                    prop_assert_eq!(e.value(), best, "prune {}", prune);
+                    // The energy by differences equals the moved labelling's own.
+                    prop_assert_eq!(e, c.energy(&s.candidate));
+                }
             }
         }
     }

@@ -863,6 +863,36 @@ impl<C: Capacity> Graph<C> {
         self.trees_valid = false;
     }
 
+    /// [`Graph::reset`] for a graph whose only capacities since the last reset were
+    /// set on `edges` (through [`Graph::set_edge_caps_unchecked`]) and `nodes` (terminal
+    /// capacities): clears just those. Flow moves only along arcs with a residual and
+    /// changes only the terminal residuals of path ends, so nothing else can be non-zero.
+    /// Needs the edge index ([`Graph::keep_edge_index`]).
+    pub(crate) fn reset_touched(&mut self, edges: &[u32], nodes: &[u32]) {
+        self.finalize();
+        for &k in edges {
+            let a = self.edge_arc[k as usize];
+            if a != NO_ARC {
+                let a = a as usize;
+                let s = self.sister(a);
+                self.arcs[a].cap = C::ZERO;
+                self.arcs[s].cap = C::ZERO;
+            }
+        }
+        for &i in nodes {
+            self.nodes[i as usize].tr = C::ZERO;
+            if let Some(t) = &mut self.terminal_caps {
+                t[i as usize] = [C::ZERO; 2];
+            }
+        }
+        for &i in &self.changed {
+            self.changed_bits.clear(i as usize);
+        }
+        self.changed.clear();
+        self.flow = C::ZERO;
+        self.trees_valid = false;
+    }
+
     /// Sets the capacities of edge `k` (its index from [`Graph::add_edge`] or the order of
     /// the batch), for a graph that was [`Graph::reset`] or finalized and not yet solved.
     pub(crate) fn set_edge_caps_unchecked(&mut self, k: usize, cap: C, rev_cap: C) {
