@@ -855,6 +855,12 @@ impl<C: Capacity> Graph<C> {
         if let Some(t) = &mut self.terminal_caps {
             t.fill([C::ZERO; 2]);
         }
+        self.forget_solve();
+    }
+
+    /// The part of a reset shared by [`Graph::reset`] and [`Graph::reset_touched`]:
+    /// no pending terminal changes, no flow, no search trees.
+    fn forget_solve(&mut self) {
         for &i in &self.changed {
             self.changed_bits.clear(i as usize);
         }
@@ -871,13 +877,7 @@ impl<C: Capacity> Graph<C> {
     pub(crate) fn reset_touched(&mut self, edges: &[u32], nodes: &[u32]) {
         self.finalize();
         for &k in edges {
-            let a = self.edge_arc[k as usize];
-            if a != NO_ARC {
-                let a = a as usize;
-                let s = self.sister(a);
-                self.arcs[a].cap = C::ZERO;
-                self.arcs[s].cap = C::ZERO;
-            }
+            self.set_edge_caps_unchecked(k as usize, C::ZERO, C::ZERO);
         }
         for &i in nodes {
             self.nodes[i as usize].tr = C::ZERO;
@@ -885,12 +885,7 @@ impl<C: Capacity> Graph<C> {
                 t[i as usize] = [C::ZERO; 2];
             }
         }
-        for &i in &self.changed {
-            self.changed_bits.clear(i as usize);
-        }
-        self.changed.clear();
-        self.flow = C::ZERO;
-        self.trees_valid = false;
+        self.forget_solve();
     }
 
     /// Sets the capacities of edge `k` (its index from [`Graph::add_edge`] or the order of
