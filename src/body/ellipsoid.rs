@@ -475,49 +475,85 @@ impl SortedPlacement {
         items: impl Iterator<Item = (usize, [f64; 3])>,
         mut emit: impl FnMut(usize, f64),
     ) {
+        self.closest_batched(items, |i, _, ys, x| {
+            emit(i, self.signed_from_closest(ys, x))
+        });
+    }
+
+    /// [`Self::signed_distances_batched`] with the normal: `emit(i, d, n)` receives the
+    /// signed distance and camera-frame outward unit normal of each local point, the
+    /// values [`Self::distance_and_normal`] gives for the camera-frame point.
+    #[inline]
+    pub fn distances_and_normals_batched(
+        &self,
+        items: impl Iterator<Item = (usize, [f64; 3])>,
+        mut emit: impl FnMut(usize, f64, [f64; 3]),
+    ) {
+        self.closest_batched(items, |i, y, ys, x| {
+            emit(i, self.signed_from_closest(ys, x), self.normal_at(y, x))
+        });
+    }
+
+    /// The first-octant closest point `x` of each local point `y` of `items`:
+    /// `emit(i, y, |y|, x)`, [`LANES`] points at a time through the lockstep root-finder
+    /// (points on a coordinate plane one by one, through the special cases).
+    #[inline]
+    fn closest_batched(
+        &self,
+        items: impl Iterator<Item = (usize, [f64; 3])>,
+        mut emit: impl FnMut(usize, &[f64; 3], &[f64; 3], &[f64; 3]),
+    ) {
+        let c = &self.sorted;
         let mut idx = [0usize; LANES];
+        let mut yl = [[0.0; 3]; LANES];
         let mut ys = [[0.0; 3]; LANES];
         let mut n = 0;
         for (i, y) in items {
             let a = [y[0].abs(), y[1].abs(), y[2].abs()];
             if a[2] > 0.0 {
                 idx[n] = i;
+                yl[n] = y;
                 ys[n] = a;
                 n += 1;
                 if n == LANES {
-                    self.flush_lanes(&idx, &ys, &mut emit);
+                    let mut sa = [[0.0; 3]; LANES];
+                    let mut lo = [0.0; LANES];
+                    let mut hi = [0.0; LANES];
+                    for l in 0..LANES {
+                        (sa[l], lo[l], hi[l]) = c.secular_setup(&ys[l]);
+                    }
+                    let u = solve_secular_lanes(&sa, &c.b, lo, hi);
+                    for l in 0..LANES {
+                        let x = c.closest_from_root(&sa[l], u[l]);
+                        emit(idx[l], &yl[l], &ys[l], &x);
+                    }
                     n = 0;
                 }
             } else {
-                // On a coordinate plane: the special cases, one by one.
-                emit(i, self.signed_distance_local(&y));
+                emit(i, &y, &a, &closest_sorted(c, a));
             }
         }
         for l in 0..n {
-            let x = closest_sorted(&self.sorted, ys[l]);
-            emit(idx[l], self.signed_from_closest(&ys[l], &x));
+            emit(idx[l], &yl[l], &ys[l], &closest_sorted(c, ys[l]));
         }
     }
 
+    /// Camera-frame outward unit normal at the closest point `x` (first octant) of the
+    /// local point `y` (signed).
     #[inline]
-    fn flush_lanes(
-        &self,
-        idx: &[usize; LANES],
-        ys: &[[f64; 3]; LANES],
-        emit: &mut impl FnMut(usize, f64),
-    ) {
-        let c = &self.sorted;
-        let mut a = [[0.0; 3]; LANES];
-        let mut lo = [0.0; LANES];
-        let mut hi = [0.0; LANES];
-        for l in 0..LANES {
-            (a[l], lo[l], hi[l]) = c.secular_setup(&ys[l]);
+    fn normal_at(&self, y: &[f64; 3], x: &[f64; 3]) -> [f64; 3] {
+        let g = [
+            x[0].copysign(y[0]) * self.inv_e2[0],
+            x[1].copysign(y[1]) * self.inv_e2[1],
+            x[2].copysign(y[2]) * self.inv_e2[2],
+        ];
+        let inv = 1.0 / (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let a = &self.axes;
+        let mut n = [0.0; 3];
+        for (c, v) in n.iter_mut().enumerate() {
+            *v = (g[0] * a[0][c] + g[1] * a[1][c] + g[2] * a[2][c]) * inv;
         }
-        let u = solve_secular_lanes(&a, &c.b, lo, hi);
-        for l in 0..LANES {
-            let x = c.closest_from_root(&a[l], u[l]);
-            emit(idx[l], self.signed_from_closest(&ys[l], &x));
-        }
+        n
     }
 
     /// Signed distance (negative inside) of camera-frame point `p`.
@@ -533,19 +569,7 @@ impl SortedPlacement {
         let y = self.local(p);
         let ys = [y[0].abs(), y[1].abs(), y[2].abs()];
         let x = closest_sorted(&self.sorted, ys);
-        let distance = self.signed_from_closest(&ys, &x);
-        let g = [
-            x[0].copysign(y[0]) * self.inv_e2[0],
-            x[1].copysign(y[1]) * self.inv_e2[1],
-            x[2].copysign(y[2]) * self.inv_e2[2],
-        ];
-        let inv = 1.0 / (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
-        let a = &self.axes;
-        let mut n = [0.0; 3];
-        for (c, v) in n.iter_mut().enumerate() {
-            *v = (g[0] * a[0][c] + g[1] * a[1][c] + g[2] * a[2][c]) * inv;
-        }
-        (distance, n)
+        (self.signed_from_closest(&ys, &x), self.normal_at(&y, &x))
     }
 }
 
@@ -736,6 +760,31 @@ mod tests {
             prop_assert!((n - q.normal).norm() < 1e-9);
             let lower = fast.distance_lower_bound(&fast.local(&pa));
             prop_assert!(lower >= 0.0 && lower <= d.abs() + 1e-12, "{lower} > {d}");
+            // The batched queries (lockstep lanes, and the scalar tail) give the same
+            // distance and normal, whichever lane (or the tail) the point takes.
+            let (d2, n2) = fast.distance_and_normal(&pa);
+            let y_local = fast.local(&pa);
+            let others = [[0.05, 0.1, -0.2], [-0.3, 0.02, 0.01], [0.2, -0.2, 0.4]];
+            for slot in 0..=LANES {
+                // `slot` points before it, then enough to fill the lanes: it sits in
+                // lane `slot`, or (slot = LANES) alone in the tail.
+                let mut items: Vec<[f64; 3]> = others.iter().cycle().take(slot).copied().collect();
+                items.push(y_local);
+                items.extend(others.iter().cycle().take(LANES.saturating_sub(slot + 1)));
+                let mut got = None;
+                fast.distances_and_normals_batched(
+                    items.iter().copied().enumerate(),
+                    |i, dd, nn| if i == slot { got = Some((dd, nn)) },
+                );
+                prop_assert_eq!(got, Some((d2, n2)));
+                let mut got = None;
+                fast.signed_distances_batched(items.iter().copied().enumerate(), |i, dd| {
+                    if i == slot {
+                        got = Some(dd)
+                    }
+                });
+                prop_assert_eq!(got, Some(d2));
+            }
         }
     }
 

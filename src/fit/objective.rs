@@ -10,7 +10,6 @@
 //! have grown to the cloud size.
 
 use super::lm::{PoseObjective, N, NN};
-use crate::body::ellipsoid::SortedPlacement;
 use crate::body::residuals::{PoseGeometry, MAX_SEGMENT_DOFS};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use rayon::prelude::*;
@@ -105,7 +104,6 @@ impl PointCost {
 struct Accumulator {
     h: [f64; NN],
     g: [f64; N],
-    cost: f64,
 }
 
 impl Default for Accumulator {
@@ -113,20 +111,33 @@ impl Default for Accumulator {
         Accumulator {
             h: [0.0; NN],
             g: [0.0; N],
-            cost: 0.0,
         }
     }
 }
 
 /// Σ over labelled points of ρ(r)/σ², r = signed distance to the label's ellipsoid.
 /// Labels outside 0..[`NUM_SEGMENTS`] (outliers, background) are skipped.
+///
+/// The labelled points are visited grouped by segment, so that each segment's exact
+/// distances go through the lockstep root-finder a few points at a time. The distances
+/// and normals of the last pose evaluated are kept: LM asks for the cost at a trial
+/// pose and, when it accepts the step, for the normal equations at that same pose,
+/// which then need only the Jacobian.
 pub struct PointObjective<'a> {
     pub model: &'a BodyModel,
     pub points: &'a [[f32; 3]],
     pub labels: &'a [i32],
     pub point_cost: PointCost,
-    chunks: Vec<Accumulator>,
+    /// Indices of the labelled points, by segment (ascending), in input order within.
+    order: Vec<u32>,
+    /// Per entry of `order` at the pose `evaluated`: the signed distance (infinite when
+    /// the lower bound already passes the truncation) and the camera-frame normal.
+    distance: Vec<f64>,
+    normal: Vec<[f64; 3]>,
+    /// Per chunk of `order` at the pose `evaluated`: Σ cost.
     partial_costs: Vec<f64>,
+    evaluated: Option<Pose>,
+    chunks: Vec<Accumulator>,
 }
 
 impl<'a> PointObjective<'a> {
@@ -139,15 +150,87 @@ impl<'a> PointObjective<'a> {
         point_cost: PointCost,
     ) -> Self {
         debug_assert_eq!(points.len(), labels.len());
-        let n_chunks = points.len().div_ceil(CHUNK_POINTS);
+        let segment = |l: i32| (l >= 0 && (l as usize) < NUM_SEGMENTS).then_some(l as usize);
+        // Counting sort of the labelled points by segment.
+        let mut start = [0usize; NUM_SEGMENTS + 1];
+        for &l in labels {
+            if let Some(k) = segment(l) {
+                start[k + 1] += 1;
+            }
+        }
+        for k in 0..NUM_SEGMENTS {
+            start[k + 1] += start[k];
+        }
+        let mut order = vec![0u32; start[NUM_SEGMENTS]];
+        for (i, &l) in labels.iter().enumerate() {
+            if let Some(k) = segment(l) {
+                order[start[k]] = i as u32;
+                start[k] += 1;
+            }
+        }
+        let m = order.len();
+        let n_chunks = m.div_ceil(CHUNK_POINTS);
         PointObjective {
             model,
             points,
             labels,
             point_cost,
-            chunks: vec![Accumulator::default(); n_chunks],
+            order,
+            distance: vec![0.0; m],
+            normal: vec![[0.0; 3]; m],
             partial_costs: vec![0.0; n_chunks],
+            evaluated: None,
+            chunks: vec![Accumulator::default(); n_chunks],
         }
+    }
+
+    /// Distances, normals and chunk costs at `pose` (kept until another pose comes).
+    fn evaluate(&mut self, pose: &Pose, geo: &PoseGeometry) {
+        if self.evaluated.as_ref() == Some(pose) {
+            return;
+        }
+        let (points, labels, pc) = (self.points, self.labels, self.point_cost);
+        self.order
+            .par_chunks(CHUNK_POINTS)
+            .zip(self.distance.par_chunks_mut(CHUNK_POINTS))
+            .zip(self.normal.par_chunks_mut(CHUNK_POINTS))
+            .zip(self.partial_costs.par_iter_mut())
+            .for_each(|(((idx, dist), normal), cost)| {
+                let mut near = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
+                let mut run = 0;
+                while run < idx.len() {
+                    // One segment's run of points within the chunk.
+                    let k = labels[idx[run] as usize] as usize;
+                    let end = run
+                        + idx[run..]
+                            .iter()
+                            .position(|&i| labels[i as usize] as usize != k)
+                            .unwrap_or(idx.len() - run);
+                    let e = &geo.segments[k];
+                    let mut m = 0;
+                    for r in run..end {
+                        let y = e.local(&vec3(&points[idx[r] as usize]));
+                        if e.distance_lower_bound(&y) > pc.truncation {
+                            // Truncated for sure: constant cost, zero weight.
+                            dist[r] = f64::INFINITY;
+                        } else {
+                            near[m] = (r, y);
+                            m += 1;
+                        }
+                    }
+                    e.distances_and_normals_batched(near[..m].iter().copied(), |r, d, n| {
+                        dist[r] = d;
+                        normal[r] = n;
+                    });
+                    run = end;
+                }
+                *cost = dist.iter().map(|&d| pc.cost(d)).sum();
+            });
+        self.evaluated = Some(*pose);
+    }
+
+    fn total_cost(&self) -> f64 {
+        self.partial_costs.iter().sum()
     }
 }
 
@@ -156,89 +239,51 @@ fn vec3(p: &[f32; 3]) -> [f64; 3] {
     [p[0] as f64, p[1] as f64, p[2] as f64]
 }
 
-/// Σ cost over labelled points for the given placed ellipsoids (one chunk). A point
-/// whose distance lower bound already reaches the truncation costs the constant cap
-/// without an exact query (the same value the exact distance would give).
-fn chunk_cost(
-    segments: &[SortedPlacement; NUM_SEGMENTS],
-    pc: &PointCost,
-    pts: &[[f32; 3]],
-    labs: &[i32],
-) -> f64 {
-    let mut c = 0.0;
-    for (p, &l) in pts.iter().zip(labs) {
-        if l >= 0 && (l as usize) < NUM_SEGMENTS {
-            let e = &segments[l as usize];
-            let y = e.local(&vec3(p));
-            c += if e.distance_lower_bound(&y) > pc.truncation {
-                pc.cap()
-            } else {
-                pc.cost(e.signed_distance_local(&y))
-            };
-        }
-    }
-    c
-}
-
 impl PoseObjective for PointObjective<'_> {
     fn cost(&mut self, pose: &Pose) -> f64 {
-        let geo = PoseGeometry::new(self.model, pose);
-        let pc = self.point_cost;
-        self.partial_costs
-            .par_iter_mut()
-            .zip(self.points.par_chunks(CHUNK_POINTS))
-            .zip(self.labels.par_chunks(CHUNK_POINTS))
-            .for_each(|((o, pts), labs)| *o = chunk_cost(&geo.segments, &pc, pts, labs));
-        self.partial_costs.iter().sum()
+        if self.evaluated.as_ref() != Some(pose) {
+            let geo = PoseGeometry::new(self.model, pose);
+            self.evaluate(pose, &geo);
+        }
+        self.total_cost()
     }
 
     fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
         let geo = PoseGeometry::new(self.model, pose);
-        let pc = self.point_cost;
+        self.evaluate(pose, &geo);
+        let (points, labels, pc) = (self.points, self.labels, self.point_cost);
         self.chunks
             .par_iter_mut()
-            .zip(self.points.par_chunks(CHUNK_POINTS))
-            .zip(self.labels.par_chunks(CHUNK_POINTS))
-            .for_each(|((acc, pts), labs)| {
+            .zip(self.order.par_chunks(CHUNK_POINTS))
+            .zip(self.distance.par_chunks(CHUNK_POINTS))
+            .zip(self.normal.par_chunks(CHUNK_POINTS))
+            .for_each(|(((acc, idx), dist), normal)| {
                 acc.h.fill(0.0);
                 acc.g.fill(0.0);
-                acc.cost = 0.0;
-                for (p, &l) in pts.iter().zip(labs) {
-                    if l < 0 || l as usize >= NUM_SEGMENTS {
-                        continue;
-                    }
-                    let k = l as usize;
-                    let e = &geo.segments[k];
-                    let p = vec3(p);
-                    if e.distance_lower_bound(&e.local(&p)) > pc.truncation {
-                        // Truncated for sure: constant cost, zero weight.
-                        acc.cost += pc.cap();
-                        continue;
-                    }
-                    let (d, normal) = e.distance_and_normal(&p);
-                    let (c, w) = pc.cost_and_weight(d);
-                    acc.cost += c;
+                for ((&i, &d), nrm) in idx.iter().zip(dist).zip(normal) {
+                    let (_, w) = pc.cost_and_weight(d);
                     if w == 0.0 {
                         continue;
                     }
+                    let k = labels[i as usize] as usize;
+                    let p = vec3(&points[i as usize]);
                     let mut jrow = [0.0; MAX_SEGMENT_DOFS];
-                    let n = geo.jacobian_row(k, &p, &normal, &mut jrow);
-                    let idx = geo.segment_dofs(k);
+                    let n = geo.jacobian_row(k, &p, nrm, &mut jrow);
+                    let dofs = geo.segment_dofs(k);
                     let wr = w * d;
                     for a in 0..n {
-                        let ia = idx[a];
+                        let ia = dofs[a];
                         acc.g[ia] += jrow[a] * wr;
                         let wj = w * jrow[a];
                         let hrow = &mut acc.h[ia * N..(ia + 1) * N];
                         for b in a..n {
-                            hrow[idx[b]] += wj * jrow[b];
+                            hrow[dofs[b]] += wj * jrow[b];
                         }
                     }
                 }
             });
         h.fill(0.0);
         g.fill(0.0);
-        let mut cost = 0.0;
         for acc in &self.chunks {
             for (o, v) in h.iter_mut().zip(&acc.h) {
                 *o += v;
@@ -246,7 +291,6 @@ impl PoseObjective for PointObjective<'_> {
             for (o, v) in g.iter_mut().zip(&acc.g) {
                 *o += v;
             }
-            cost += acc.cost;
         }
         // Only the upper triangle (in dof order) was accumulated: mirror it.
         for i in 0..N {
@@ -254,7 +298,7 @@ impl PoseObjective for PointObjective<'_> {
                 h[i * N + j] = h[j * N + i];
             }
         }
-        cost
+        self.total_cost()
     }
 }
 
@@ -336,6 +380,69 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The kept distances are those of the pose asked for: the normal equations after
+    /// costs at other poses (and after a cost at the same pose) equal a fresh
+    /// objective's, bit for bit, and so does the cost.
+    #[test]
+    fn kept_evaluation_follows_the_pose() {
+        let model = BodyModel::default();
+        let (a, b) = (pose_for_tests(2), pose_for_tests(5));
+        let (pts, labels) = scattered(&model, &a, 2500);
+        let pc = PointCost {
+            sigma: 0.03,
+            loss: Loss::Huber(0.03),
+            truncation: 0.15,
+        };
+        let fresh = |pose: &Pose| {
+            let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+            let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+            let c = obj.normal_equations(pose, &mut h, &mut g);
+            (c, h, g)
+        };
+        let (ca, ha, ga) = fresh(&a);
+        let (cb, hb, gb) = fresh(&b);
+        assert_ne!(ca, cb);
+        let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+        let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+        for (pose, c, hh, gg) in [(&a, ca, ha, ga), (&b, cb, hb, gb), (&a, ca, ha, ga)] {
+            assert_eq!(obj.cost(pose), c);
+            assert_eq!(obj.normal_equations(pose, &mut h, &mut g), c);
+            assert_eq!((h, g), (hh, gg));
+            let other = if pose == &a { &b } else { &a };
+            obj.cost(other);
+            assert_eq!(obj.normal_equations(pose, &mut h, &mut g), c);
+            assert_eq!((h, g), (hh, gg));
+        }
+    }
+
+    /// The cost is the sum of the per-point costs with one exact scalar query each
+    /// (the grouping by segment and the lockstep root-finder change nothing but the
+    /// summation order).
+    #[test]
+    fn cost_matches_scalar_queries() {
+        let model = BodyModel::default();
+        let pose = pose_for_tests(3);
+        let (pts, labels) = scattered(&model, &pose, 3000);
+        let pc = PointCost {
+            sigma: 0.02,
+            loss: Loss::Squared,
+            truncation: 0.2,
+        };
+        let geo = PoseGeometry::new(&model, &pose);
+        let expected: f64 = pts
+            .iter()
+            .zip(&labels)
+            .filter(|(_, &l)| (0..NUM_SEGMENTS as i32).contains(&l))
+            .map(|(p, &l)| pc.cost(geo.segments[l as usize].signed_distance(&vec3(p))))
+            .sum();
+        let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+        let c = obj.cost(&pose);
+        assert!(
+            (c - expected).abs() <= 1e-12 * expected,
+            "{c} vs {expected}"
+        );
     }
 
     #[test]
