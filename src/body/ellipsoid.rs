@@ -35,6 +35,27 @@ pub struct EllipsoidDistance {
     pub normal: Vector3<f64>,
 }
 
+/// 1/(u + b_k) for every k with one division (batch inversion through the prefix
+/// products): divisions dominate the root-finder's iterations. All factors are
+/// positive and moderate (u > 0, b_k ≥ 0), so the products neither overflow nor
+/// underflow.
+#[inline(always)]
+fn reciprocals<const N: usize>(u: f64, b: &[f64; N]) -> [f64; N] {
+    let mut prefix = [1.0; N];
+    let mut p = 1.0;
+    for k in 0..N {
+        prefix[k] = p;
+        p *= u + b[k];
+    }
+    let mut inv = 1.0 / p;
+    let mut out = [0.0; N];
+    for k in (0..N).rev() {
+        out[k] = inv * prefix[k];
+        inv *= u + b[k];
+    }
+    out
+}
+
 /// Root u of S(u) = Σ_k (a_k / (u + b_k))² = 1 on [lo, hi] (S decreasing, S(lo) ≥ 1 ≥
 /// S(hi)); `a_k` ≥ 0, `b_k` ≥ 0.
 #[inline]
@@ -43,8 +64,9 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
     for _ in 0..MAX_ITERATIONS {
         let mut s = 0.0;
         let mut ds = 0.0;
+        let invs = reciprocals(u, b);
         for k in 0..N {
-            let inv = 1.0 / (u + b[k]);
+            let inv = invs[k];
             let q = a[k] * inv;
             let q2 = q * q;
             s += q2;
@@ -96,8 +118,9 @@ fn solve_secular_lanes(
         let mut s = [0.0; LANES];
         let mut ds = [0.0; LANES];
         for l in 0..LANES {
+            let invs = reciprocals(u[l], b);
             for k in 0..3 {
-                let inv = 1.0 / (u[l] + b[k]);
+                let inv = invs[k];
                 let q = a[l][k] * inv;
                 let q2 = q * q;
                 s[l] += q2;
