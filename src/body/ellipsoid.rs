@@ -246,11 +246,11 @@ impl Sorted {
     /// The closest point x_k = e_k a_k / (u + b_k) for the root u.
     #[inline]
     fn closest_from_root(&self, a: &[f64; 3], u: f64) -> [f64; 3] {
-        let (e, b) = (self.e, self.b);
+        let (e, inv) = (self.e, reciprocals(u, &self.b));
         [
-            e[0] * a[0] / (u + b[0]),
-            e[1] * a[1] / (u + b[1]),
-            e[2] * a[2] / u,
+            e[0] * a[0] * inv[0],
+            e[1] * a[1] * inv[1],
+            e[2] * a[2] * inv[2],
         ]
     }
 }
@@ -387,6 +387,13 @@ impl PlacedEllipsoid {
     }
 }
 
+/// Thresholds for [`SortedPlacement::is_beyond`] (one distance, one ellipsoid).
+#[derive(Debug, Clone, Copy)]
+pub struct Beyond {
+    level: f64,
+    norm2: f64,
+}
+
 /// A placed ellipsoid prepared for many camera-frame queries in a hot loop: the axis
 /// sort is folded into the rotation (row k is the camera-frame direction of sorted
 /// axis k), so a query is one 3×3 product, the first-octant closest-point solve and a
@@ -464,6 +471,32 @@ impl SortedPlacement {
         let scaled = self.sorted.e[2] * (level.sqrt() - 1.0);
         let sphere = (y[0] * y[0] + y[1] * y[1] + y[2] * y[2]).sqrt() - self.sorted.e[0];
         scaled.max(sphere)
+    }
+
+    /// The thresholds of [`Self::is_beyond`] for distance `t`.
+    #[inline]
+    pub fn beyond(&self, t: f64) -> Beyond {
+        if t <= 0.0 {
+            // Every lower bound is ≥ 0 ≥ t.
+            return Beyond {
+                level: 0.0,
+                norm2: 0.0,
+            };
+        }
+        let s = 1.0 + t / self.sorted.e[2];
+        let r = self.sorted.e[0] + t;
+        Beyond {
+            level: s * s,
+            norm2: r * r,
+        }
+    }
+
+    /// [`Self::distance_lower_bound`]`(y) >= t`, decided without square roots: the
+    /// scaled bound passes t when the level passes (1 + t/e_min)², the sphere bound
+    /// when |y|² passes (e_max + t)² (either puts `y` outside, for t > 0).
+    #[inline]
+    pub fn is_beyond(&self, b: &Beyond, y: &[f64; 3]) -> bool {
+        self.level(y) >= b.level || y[0] * y[0] + y[1] * y[1] + y[2] * y[2] >= b.norm2
     }
 
     /// Signed distance (negative inside) of local point `y` (from [`Self::local`]).
@@ -783,6 +816,13 @@ mod tests {
             prop_assert!((n - q.normal).norm() < 1e-9);
             let lower = fast.distance_lower_bound(&fast.local(&pa));
             prop_assert!(lower >= 0.0 && lower <= d.abs() + 1e-12, "{lower} > {d}");
+            // The square-root-free test agrees with the bound, away from rounding ties.
+            let yl = fast.local(&pa);
+            for t in [-0.1, 0.0, 0.5 * lower, lower * (1.0 - 1e-9), lower * (1.0 + 1e-9), 2.0 * lower + 0.01] {
+                if t <= 0.0 || (lower - t).abs() > 1e-12 * t {
+                    prop_assert_eq!(fast.is_beyond(&fast.beyond(t), &yl), lower >= t, "t {}", t);
+                }
+            }
             // The batched queries (lockstep lanes, and the scalar tail) give the same
             // distance and normal, whichever lane (or the tail) the point takes.
             let (d2, n2) = fast.distance_and_normal(&pa);

@@ -269,10 +269,11 @@ pub fn unary_costs(
                 // A lower bound of the distance at or beyond the truncation means the
                 // cost is the cap, exactly what the exact distance would give; only
                 // the points nearer than that need the exact (iterative) distance.
+                let far = e.beyond(pc.truncation);
                 let mut m = 0;
                 for (i, p) in buf.iter().enumerate() {
                     let y = e.local(p);
-                    if e.distance_lower_bound(&y) >= pc.truncation {
+                    if e.is_beyond(&far, &y) {
                         u[i * NUM_LABELS + k] = cap;
                     } else {
                         near[m] = (i, y);

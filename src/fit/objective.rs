@@ -207,10 +207,11 @@ impl<'a> PointObjective<'a> {
                             .position(|&i| labels[i as usize] as usize != k)
                             .unwrap_or(idx.len() - run);
                     let e = &geo.segments[k];
+                    let far = e.beyond(pc.truncation);
                     let mut m = 0;
                     for r in run..end {
                         let y = e.local(&vec3(&points[idx[r] as usize]));
-                        if e.distance_lower_bound(&y) > pc.truncation {
+                        if e.is_beyond(&far, &y) {
                             // Truncated for sure: constant cost, zero weight.
                             dist[r] = f64::INFINITY;
                         } else {
