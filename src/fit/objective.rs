@@ -12,6 +12,8 @@
 use super::lm::{PoseObjective, N, NN};
 use crate::body::residuals::{PoseGeometry, MAX_SEGMENT_DOFS};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
+use faer::linalg::matmul::matmul;
+use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 /// Points per parallel chunk.
@@ -99,11 +101,16 @@ impl PointCost {
     }
 }
 
-/// One chunk's share of the normal equations.
+/// One chunk's share of the normal equations, and its work space.
 #[derive(Clone)]
 struct Accumulator {
     h: [f64; NN],
     g: [f64; N],
+    /// √w·J of one segment's run of points: column-major, `CHUNK_POINTS` rows per
+    /// column (one column per degree of freedom of the segment).
+    jw: Vec<f64>,
+    /// √w·r of the same points.
+    rw: Vec<f64>,
 }
 
 impl Default for Accumulator {
@@ -111,6 +118,8 @@ impl Default for Accumulator {
         Accumulator {
             h: [0.0; NN],
             g: [0.0; N],
+            jw: vec![0.0; CHUNK_POINTS * MAX_SEGMENT_DOFS],
+            rw: vec![0.0; CHUNK_POINTS],
         }
     }
 }
@@ -261,24 +270,64 @@ impl PoseObjective for PointObjective<'_> {
             .for_each(|(((acc, idx), dist), normal)| {
                 acc.h.fill(0.0);
                 acc.g.fill(0.0);
-                for ((&i, &d), nrm) in idx.iter().zip(dist).zip(normal) {
-                    let (_, w) = pc.cost_and_weight(d);
-                    if w == 0.0 {
+                let mut run = 0;
+                while run < idx.len() {
+                    // One segment's run of points: its weighted Jacobian rows share the
+                    // segment's degrees of freedom, so JᵀWJ is one dense product.
+                    let k = labels[idx[run] as usize] as usize;
+                    let end = run
+                        + idx[run..]
+                            .iter()
+                            .position(|&i| labels[i as usize] as usize != k)
+                            .unwrap_or(idx.len() - run);
+                    let dofs = geo.segment_dofs(k);
+                    let n = dofs.len();
+                    let mut m = 0;
+                    for r in run..end {
+                        let d = dist[r];
+                        let (_, w) = pc.cost_and_weight(d);
+                        if w == 0.0 {
+                            continue;
+                        }
+                        let p = vec3(&points[idx[r] as usize]);
+                        let mut jrow = [0.0; MAX_SEGMENT_DOFS];
+                        geo.jacobian_row(k, &p, &normal[r], &mut jrow);
+                        let sw = w.sqrt();
+                        for (a, j) in jrow[..n].iter().enumerate() {
+                            acc.jw[a * CHUNK_POINTS + m] = sw * j;
+                        }
+                        acc.rw[m] = sw * d;
+                        m += 1;
+                    }
+                    run = end;
+                    if m == 0 {
                         continue;
                     }
-                    let k = labels[i as usize] as usize;
-                    let p = vec3(&points[i as usize]);
-                    let mut jrow = [0.0; MAX_SEGMENT_DOFS];
-                    let n = geo.jacobian_row(k, &p, nrm, &mut jrow);
-                    let dofs = geo.segment_dofs(k);
-                    let wr = w * d;
+                    let jw = MatRef::from_column_major_slice_with_stride(
+                        &acc.jw[..(n - 1) * CHUNK_POINTS + m],
+                        m,
+                        n,
+                        CHUNK_POINTS,
+                    );
+                    let mut local = [0.0; MAX_SEGMENT_DOFS * MAX_SEGMENT_DOFS];
+                    matmul(
+                        MatMut::from_column_major_slice_mut(&mut local[..n * n], n, n),
+                        Accum::Replace,
+                        jw.transpose(),
+                        jw,
+                        1.0,
+                        Par::Seq,
+                    );
                     for a in 0..n {
-                        let ia = dofs[a];
-                        acc.g[ia] += jrow[a] * wr;
-                        let wj = w * jrow[a];
-                        let hrow = &mut acc.h[ia * N..(ia + 1) * N];
+                        let col = &acc.jw[a * CHUNK_POINTS..a * CHUNK_POINTS + m];
+                        acc.g[dofs[a]] += col
+                            .iter()
+                            .zip(&acc.rw[..m])
+                            .map(|(x, y)| x * y)
+                            .sum::<f64>();
+                        // Upper triangle in dof order (`dofs` ascends); mirrored at the end.
                         for b in a..n {
-                            hrow[dofs[b]] += wj * jrow[b];
+                            acc.h[dofs[a] * N + dofs[b]] += local[b * n + a];
                         }
                     }
                 }
