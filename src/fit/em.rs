@@ -440,11 +440,14 @@ pub fn hard_em(
     let mut trace = vec![energy];
     let mut termination = EmTermination::MaxIterations;
     let mut iterations = 0;
+    let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
     while iterations < config.max_iterations {
         iterations += 1;
         let energy_at_start = energy;
         // M-step.
-        let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
+        if iterations > 1 {
+            objective.relabel(&labels, config.point_cost(tau));
+        }
         let mut new_pose = pose;
         let report = {
             let mut with_prior = WithPrior {

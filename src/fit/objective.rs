@@ -135,10 +135,11 @@ impl Default for Accumulator {
 pub struct PointObjective<'a> {
     pub model: &'a BodyModel,
     pub points: &'a [[f32; 3]],
-    pub labels: &'a [i32],
     pub point_cost: PointCost,
     /// Indices of the labelled points, by segment (ascending), in input order within.
     order: Vec<u32>,
+    /// The segment of each entry of `order`.
+    segment: Vec<u8>,
     /// Per entry of `order` at the pose `evaluated`: the signed distance (infinite when
     /// the lower bound already passes the truncation) and the camera-frame normal.
     distance: Vec<f64>,
@@ -155,10 +156,29 @@ impl<'a> PointObjective<'a> {
     pub fn new(
         model: &'a BodyModel,
         points: &'a [[f32; 3]],
-        labels: &'a [i32],
+        labels: &[i32],
         point_cost: PointCost,
     ) -> Self {
-        debug_assert_eq!(points.len(), labels.len());
+        let mut objective = PointObjective {
+            model,
+            points,
+            point_cost,
+            order: Vec::new(),
+            segment: Vec::new(),
+            distance: Vec::new(),
+            normal: Vec::new(),
+            partial_costs: Vec::new(),
+            evaluated: None,
+            chunks: Vec::new(),
+        };
+        objective.relabel(labels, point_cost);
+        objective
+    }
+
+    /// New labels (and cost settings) for the same points, reusing the buffers: the EM
+    /// loop calls this once per M-step instead of building a new objective.
+    pub fn relabel(&mut self, labels: &[i32], point_cost: PointCost) {
+        debug_assert_eq!(self.points.len(), labels.len());
         let segment = |l: i32| (l >= 0 && (l as usize) < NUM_SEGMENTS).then_some(l as usize);
         // Counting sort of the labelled points by segment.
         let mut start = [0usize; NUM_SEGMENTS + 1];
@@ -170,27 +190,25 @@ impl<'a> PointObjective<'a> {
         for k in 0..NUM_SEGMENTS {
             start[k + 1] += start[k];
         }
-        let mut order = vec![0u32; start[NUM_SEGMENTS]];
+        let m = start[NUM_SEGMENTS];
+        self.segment.clear();
+        for k in 0..NUM_SEGMENTS {
+            self.segment.resize(start[k + 1], k as u8);
+        }
+        self.order.resize(m, 0);
         for (i, &l) in labels.iter().enumerate() {
             if let Some(k) = segment(l) {
-                order[start[k]] = i as u32;
+                self.order[start[k]] = i as u32;
                 start[k] += 1;
             }
         }
-        let m = order.len();
         let n_chunks = m.div_ceil(CHUNK_POINTS);
-        PointObjective {
-            model,
-            points,
-            labels,
-            point_cost,
-            order,
-            distance: vec![0.0; m],
-            normal: vec![[0.0; 3]; m],
-            partial_costs: vec![0.0; n_chunks],
-            evaluated: None,
-            chunks: vec![Accumulator::default(); n_chunks],
-        }
+        self.distance.resize(m, 0.0);
+        self.normal.resize(m, [0.0; 3]);
+        self.partial_costs.resize(n_chunks, 0.0);
+        self.chunks.resize_with(n_chunks, Accumulator::default);
+        self.point_cost = point_cost;
+        self.evaluated = None;
     }
 
     /// Distances, normals and chunk costs at `pose` (kept until another pose comes).
@@ -198,27 +216,20 @@ impl<'a> PointObjective<'a> {
         if self.evaluated.as_ref() == Some(pose) {
             return;
         }
-        let (points, labels, pc) = (self.points, self.labels, self.point_cost);
+        let (points, pc) = (self.points, self.point_cost);
         self.order
             .par_chunks(CHUNK_POINTS)
+            .zip(self.segment.par_chunks(CHUNK_POINTS))
             .zip(self.distance.par_chunks_mut(CHUNK_POINTS))
             .zip(self.normal.par_chunks_mut(CHUNK_POINTS))
             .zip(self.partial_costs.par_iter_mut())
-            .for_each(|(((idx, dist), normal), cost)| {
+            .for_each(|((((idx, seg), dist), normal), cost)| {
                 let mut near = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
-                let mut run = 0;
-                while run < idx.len() {
-                    // One segment's run of points within the chunk.
-                    let k = labels[idx[run] as usize] as usize;
-                    let end = run
-                        + idx[run..]
-                            .iter()
-                            .position(|&i| labels[i as usize] as usize != k)
-                            .unwrap_or(idx.len() - run);
+                for (k, run) in segment_runs(seg) {
                     let e = &geo.segments[k];
                     let far = e.beyond(pc.truncation);
                     let mut m = 0;
-                    for r in run..end {
+                    for r in run {
                         let y = e.local(&vec3(&points[idx[r] as usize]));
                         if e.is_beyond(&far, &y) {
                             // Truncated for sure: constant cost, zero weight.
@@ -232,7 +243,6 @@ impl<'a> PointObjective<'a> {
                         dist[r] = d;
                         normal[r] = n;
                     });
-                    run = end;
                 }
                 *cost = dist.iter().map(|&d| pc.cost(d)).sum();
             });
@@ -242,6 +252,19 @@ impl<'a> PointObjective<'a> {
     fn total_cost(&self) -> f64 {
         self.partial_costs.iter().sum()
     }
+}
+
+/// The runs of equal segment in `seg` (a chunk of a segment-sorted order): (segment,
+/// index range).
+fn segment_runs(seg: &[u8]) -> impl Iterator<Item = (usize, std::ops::Range<usize>)> + '_ {
+    let mut start = 0;
+    std::iter::from_fn(move || {
+        let k = *seg.get(start)?;
+        let len = seg[start..].iter().take_while(|&&s| s == k).count();
+        let run = start..start + len;
+        start += len;
+        Some((k as usize, run))
+    })
 }
 
 #[inline]
@@ -261,29 +284,23 @@ impl PoseObjective for PointObjective<'_> {
     fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
         let geo = PoseGeometry::new(self.model, pose);
         self.evaluate(pose, &geo);
-        let (points, labels, pc) = (self.points, self.labels, self.point_cost);
+        let (points, pc) = (self.points, self.point_cost);
         self.chunks
             .par_iter_mut()
             .zip(self.order.par_chunks(CHUNK_POINTS))
+            .zip(self.segment.par_chunks(CHUNK_POINTS))
             .zip(self.distance.par_chunks(CHUNK_POINTS))
             .zip(self.normal.par_chunks(CHUNK_POINTS))
-            .for_each(|(((acc, idx), dist), normal)| {
+            .for_each(|((((acc, idx), seg), dist), normal)| {
                 acc.h.fill(0.0);
                 acc.g.fill(0.0);
-                let mut run = 0;
-                while run < idx.len() {
-                    // One segment's run of points: its weighted Jacobian rows share the
-                    // segment's degrees of freedom, so JᵀWJ is one dense product.
-                    let k = labels[idx[run] as usize] as usize;
-                    let end = run
-                        + idx[run..]
-                            .iter()
-                            .position(|&i| labels[i as usize] as usize != k)
-                            .unwrap_or(idx.len() - run);
+                // Each segment's run of points: its weighted Jacobian rows share the
+                // segment's degrees of freedom, so JᵀWJ is one dense product.
+                for (k, run) in segment_runs(seg) {
                     let dofs = geo.segment_dofs(k);
                     let n = dofs.len();
                     let mut m = 0;
-                    for r in run..end {
+                    for r in run {
                         let d = dist[r];
                         let (_, w) = pc.cost_and_weight(d);
                         if w == 0.0 {
@@ -299,7 +316,6 @@ impl PoseObjective for PointObjective<'_> {
                         acc.rw[m] = sw * d;
                         m += 1;
                     }
-                    run = end;
                     if m == 0 {
                         continue;
                     }
@@ -464,6 +480,37 @@ mod tests {
             obj.cost(other);
             assert_eq!(obj.normal_equations(pose, &mut h, &mut g), c);
             assert_eq!((h, g), (hh, gg));
+        }
+    }
+
+    /// An objective relabelled (fewer, then more labelled points; other cost settings)
+    /// gives what a fresh objective for those labels gives, bit for bit.
+    #[test]
+    fn relabel_equals_a_fresh_objective() {
+        let model = BodyModel::default();
+        let pose = pose_for_tests(6);
+        let (pts, labels) = scattered(&model, &pose, 3000);
+        let fewer: Vec<i32> = labels
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| if i % 3 == 0 { -1 } else { (l + 1) % 15 })
+            .collect();
+        let pc = |t: f64| PointCost {
+            sigma: 0.02,
+            loss: Loss::Cauchy(0.05),
+            truncation: t,
+        };
+        let system = |obj: &mut PointObjective| {
+            let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+            let c = obj.normal_equations(&pose, &mut h, &mut g);
+            (c, h, g)
+        };
+        let mut reused = PointObjective::new(&model, &pts, &labels, pc(0.3));
+        system(&mut reused);
+        for (labs, t) in [(&fewer, 0.2), (&labels, 0.25)] {
+            reused.relabel(labs, pc(t));
+            let mut fresh = PointObjective::new(&model, &pts, labs, pc(t));
+            assert_eq!(system(&mut reused), system(&mut fresh));
         }
     }
 
