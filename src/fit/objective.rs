@@ -133,9 +133,10 @@ impl Default for Accumulator {
 /// pose and, when it accepts the step, for the normal equations at that same pose,
 /// which then need only the Jacobian.
 pub struct PointObjective<'a> {
-    pub model: &'a BodyModel,
-    pub points: &'a [[f32; 3]],
-    pub point_cost: PointCost,
+    // Private: the kept evaluation is valid only for these (see `relabel`).
+    model: &'a BodyModel,
+    points: &'a [[f32; 3]],
+    point_cost: PointCost,
     /// Indices of the labelled points, by segment (ascending), in input order within.
     order: Vec<u32>,
     /// The segment of each entry of `order`.
