@@ -115,6 +115,35 @@ def test_fit_is_deterministic_and_accepts_dict_config():
     assert a.iterations <= 5
 
 
+def test_fit_poses_equals_separate_fits():
+    """The batch shares the cloud and graph and runs the fits in parallel; each result
+    must be exactly its own fit_pose call (full resolution and stride 2, with a prior)."""
+    model = BodyModel()
+    truth = natural_pose(model)
+    depth, _ = model.render_depth(truth, CAM)
+    rng = np.random.default_rng(5)
+    inits = np.array([perturbed(model, truth, rng) for _ in range(3)])
+    for cfg in ({"max_iterations": 3}, {"max_iterations": 3, "stride": 2}):
+        batch = dp.fit_poses(depth, CAM, inits, model=model, config=cfg, prior=truth)
+        assert len(batch) == len(inits)
+        for init, b in zip(inits, batch, strict=True):
+            a = dp.fit_pose(depth, CAM, init, model=model, config=cfg, prior=truth)
+            assert np.array_equal(a.pose, b.pose) and np.array_equal(a.labels, b.labels)
+            assert a.energy == b.energy and a.iterations == b.iterations
+    with pytest.raises(dp.InvalidInputError, match="init_poses.*empty"):
+        dp.fit_poses(depth, CAM, np.empty((0, 22)))
+    with pytest.raises(dp.InvalidInputError, match="init_poses"):
+        dp.fit_poses(depth, CAM, inits[:, :21])
+    with pytest.raises(dp.InvalidInputError, match="init_poses"):
+        dp.fit_poses(depth, CAM, inits[0])
+    bad = inits.copy()
+    bad[1, 9] = np.nan
+    with pytest.raises(dp.InvalidInputError, match=r"init_poses\[1\]"):
+        dp.fit_poses(depth, CAM, bad)
+    with pytest.raises(dp.NoBodyError):
+        dp.fit_poses(np.zeros_like(depth), CAM, inits)
+
+
 def test_prior_holds_the_pose():
     model = BodyModel()
     truth = natural_pose(model)

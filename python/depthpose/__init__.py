@@ -21,7 +21,15 @@ from ._core import (
 )
 from .body import BodyModel
 from .cloud import PointCloud, foreground_mask, point_cloud
-from .fit import FitConfig, FitResult, ShapeFitResult, fit_pose, fit_shape, pose_from_joints
+from .fit import (
+    FitConfig,
+    FitResult,
+    ShapeFitResult,
+    fit_pose,
+    fit_poses,
+    fit_shape,
+    pose_from_joints,
+)
 from .io import read_depth, read_image, write_depth
 from .pipeline import PipelineConfig, PoseEstimator, PoseResult, PoseTracker, estimate_stereo
 from .templates import Candidate, TemplateDatabase, surface_context
@@ -51,6 +59,7 @@ __all__ = [
     "__version__",
     "depth_to_points",
     "fit_pose",
+    "fit_poses",
     "foreground_mask",
     "io",
     "pixel_graph",

@@ -372,6 +372,17 @@ def fit_pose(
     prior: npt.NDArray[np.float64] | None = None,
     prior_weight: float = 100.0,
 ) -> FitResult: ...
+def fit_poses(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    init_poses: npt.NDArray[np.float64],
+    *,
+    model: BodyModel | None = None,
+    mask: npt.NDArray[np.bool_] | None = None,
+    config: FitConfig | None = None,
+    prior: npt.NDArray[np.float64] | None = None,
+    prior_weight: float = 100.0,
+) -> list[FitResult]: ...
 def pose_from_joints(
     joints: npt.NDArray[np.float64],
     model: BodyModel | None = None,

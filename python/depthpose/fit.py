@@ -1,6 +1,7 @@
 """Model fitting: CRF body-part labelling + Levenberg-Marquardt in a hard EM loop.
 
-`fit_pose` fits the body model to the foreground of a depth image from an initial pose;
+`fit_pose` fits the body model to the foreground of a depth image from an initial pose
+(`fit_poses` from several start poses at once, in parallel);
 `pose_from_joints` is inverse kinematics (the pose whose 15 joints best match given
 joint positions, NaN rows skipped). Both default to `BodyModel()` (1.75 m reference
 proportions). `fit_shape` calibrates the body shape (12 symmetric scale factors of
@@ -17,6 +18,7 @@ import numpy as np
 
 from depthpose._core import BodyModel, Camera, FitConfig, FitResult, ShapeFitResult
 from depthpose._core import fit_pose as _fit_pose
+from depthpose._core import fit_poses as _fit_poses
 from depthpose._core import pose_from_joints as _pose_from_joints
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "FitResult",
     "ShapeFitResult",
     "fit_pose",
+    "fit_poses",
     "fit_shape",
     "pose_from_joints",
 ]
@@ -60,6 +63,35 @@ def fit_pose(
         depth,
         camera,
         np.asarray(init_pose),
+        model=model,
+        mask=mask,
+        config=_config(config),
+        prior=None if prior is None else np.asarray(prior),
+        prior_weight=prior_weight,
+    )
+
+
+def fit_poses(
+    depth: np.ndarray,
+    camera: Camera,
+    init_poses: np.ndarray | Sequence[np.ndarray],
+    *,
+    model: BodyModel | None = None,
+    mask: np.ndarray | None = None,
+    config: None | FitConfig | Mapping[str, Any] = None,
+    prior: np.ndarray | None = None,
+    prior_weight: float = 100.0,
+) -> list[FitResult]:
+    """`fit_pose` from each of `init_poses` ((K, 22), K ≥ 1) on the same image.
+
+    The foreground cloud and its graph are built once and the K fits run in parallel
+    (one fit's work is mostly sequential), so on several cores this is much faster than
+    K `fit_pose` calls; each result is identical to its own `fit_pose` call.
+    """
+    return _fit_poses(
+        depth,
+        camera,
+        np.asarray(init_poses),
         model=model,
         mask=mask,
         config=_config(config),

@@ -349,23 +349,41 @@ class PoseEstimator:
             return np.ascontiguousarray(mask, dtype=bool)
         return foreground_mask(depth, self.background)
 
-    def _fit(self, depth, mask, init, *, iterations=None, prior=None, stride=None):
-        from .fit import FitConfig, fit_pose
+    def _fit_config(self, iterations=None, stride=None):
+        from .fit import FitConfig
 
         kwargs = dict(self.config.fit or {})
         if iterations is not None:
             kwargs["max_iterations"] = iterations
         if stride is not None:
             kwargs["stride"] = stride
+        return FitConfig(**kwargs)
+
+    def _fit(self, depth, mask, init, *, iterations=None, prior=None, stride=None):
+        from .fit import fit_pose
+
         return fit_pose(
             depth,
             self.camera,
             init,
             model=self.model,
             mask=mask,
-            config=FitConfig(**kwargs),
+            config=self._fit_config(iterations, stride),
             prior=prior,
             prior_weight=self.config.prior_weight,
+        )
+
+    def _fits(self, depth, mask, inits, *, iterations=None, stride=None):
+        """:meth:`_fit` from each of ``inits``, in parallel (no prior)."""
+        from .fit import fit_poses
+
+        return fit_poses(
+            depth,
+            self.camera,
+            np.asarray(inits, np.float64).reshape(-1, 22),
+            model=self.model,
+            mask=mask,
+            config=self._fit_config(iterations, stride),
         )
 
     def _result(self, fit, timings, source, discrepancy=float("nan")) -> PoseResult:
@@ -417,16 +435,13 @@ class PoseEstimator:
             timings["templates"] = time.perf_counter()
         ranked = sorted(starts, key=lambda q: self.discrepancy(q, depth, mask))
         chosen = [*list(extra), *ranked[: max(1, self.config.hypotheses)]]
-        fits = [
-            self._fit(
-                depth,
-                mask,
-                q,
-                iterations=self.config.candidate_iterations,
-                stride=self.config.candidate_stride,
-            )
-            for q in chosen
-        ]
+        fits = self._fits(
+            depth,
+            mask,
+            chosen,
+            iterations=self.config.candidate_iterations,
+            stride=self.config.candidate_stride,
+        )
         scores = [self.discrepancy(f.pose, depth, mask) for f in fits]
         k = int(np.argmin(scores))
         best, best_score = fits[k], scores[k]

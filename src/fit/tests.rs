@@ -243,3 +243,29 @@ fn stride_out_of_range_is_an_error() {
         assert!(err.to_string().contains("stride"), "{err}");
     }
 }
+
+/// The batch builds the cloud and graph once and fits in parallel; every result must be
+/// exactly the separate fit's.
+#[test]
+fn fit_poses_equals_separate_fits() {
+    let model = BodyModel::default();
+    let cam = Camera::itop();
+    let truth = natural_pose();
+    let (depth, _) = model.render_depth(&truth, &cam);
+    let inits: Vec<Pose> = (1..4)
+        .map(|seed| perturbed(&truth, seed, 15f64.to_radians(), 0.05))
+        .collect();
+    for stride in [1, 2] {
+        let mut config = FitConfig {
+            stride,
+            ..FitConfig::default()
+        };
+        config.em.max_iterations = 3;
+        let batch = fit_poses(&depth, &cam, &inits, &model, None, None, &config).unwrap();
+        assert_eq!(batch.len(), inits.len());
+        for (init, b) in inits.iter().zip(&batch) {
+            let a = fit_pose(&depth, &cam, init, &model, None, None, &config).unwrap();
+            assert_eq!(&a, b);
+        }
+    }
+}

@@ -338,6 +338,75 @@ impl PyShapeFitResult {
     }
 }
 
+/// The arguments `fit_pose` and `fit_poses` share, checked.
+struct FitArgs {
+    depth: Vec<f32>,
+    height: usize,
+    width: usize,
+    mask: Option<Vec<bool>>,
+    config: FitConfig,
+    prior: Option<PosePrior>,
+    model: BodyModel,
+}
+
+impl FitArgs {
+    fn parse(
+        depth: &Bound<'_, PyAny>,
+        camera: &PyCamera,
+        model: Option<&PyBodyModel>,
+        mask: Option<&Bound<'_, PyAny>>,
+        config: Option<&PyFitConfig>,
+        prior: Option<&Bound<'_, PyAny>>,
+        prior_weight: f64,
+    ) -> PyResult<Self> {
+        let d = depth_array(depth, "depth")?;
+        let (height, width) = (d.shape[0], d.shape[1]);
+        camera.inner.check_image("depth", height, width)?;
+        let mask = mask
+            .map(|m| bool_array(m, "mask", &[height, width]))
+            .transpose()?;
+        let config = match config {
+            Some(c) => c.to_rust()?,
+            None => FitConfig::default(),
+        };
+        let prior = match prior {
+            Some(p) => {
+                let a = f64_array(p, "prior", Some(1), true)?;
+                if !(prior_weight.is_finite() && prior_weight >= 0.0) {
+                    return Err(Error::invalid(
+                        "prior_weight",
+                        format!("must be finite and >= 0, got {prior_weight}"),
+                    )
+                    .into());
+                }
+                Some(PosePrior::uniform(
+                    pose_from_slice(&a.data, "prior")?,
+                    prior_weight,
+                    prior_weight,
+                ))
+            }
+            None => None,
+        };
+        Ok(FitArgs {
+            depth: d.data,
+            height,
+            width,
+            mask,
+            config,
+            prior,
+            model: model.map_or_else(BodyModel::default, |m| m.inner.clone()),
+        })
+    }
+
+    fn result(&self, result: fit::FitResult) -> PyFitResult {
+        PyFitResult {
+            result,
+            height: self.height,
+            width: self.width,
+        }
+    }
+}
+
 /// Fits the body to the depth image from `init_pose` (hard EM: CRF labels + LM).
 #[pyfunction]
 #[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
@@ -353,52 +422,64 @@ fn fit_pose(
     prior: Option<&Bound<'_, PyAny>>,
     prior_weight: f64,
 ) -> PyResult<PyFitResult> {
-    let d = depth_array(depth, "depth")?;
-    let (h, w) = (d.shape[0], d.shape[1]);
-    camera.inner.check_image("depth", h, w)?;
+    let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
     let init = f64_array(init_pose, "init_pose", Some(1), false)?;
-    pose_from_slice(&init.data, "init_pose")?;
-    let mask = mask.map(|m| bool_array(m, "mask", &[h, w])).transpose()?;
-    let cfg = match config {
-        Some(c) => c.to_rust()?,
-        None => FitConfig::default(),
-    };
-    let prior = match prior {
-        Some(p) => {
-            let a = f64_array(p, "prior", Some(1), true)?;
-            if !(prior_weight.is_finite() && prior_weight >= 0.0) {
-                return Err(Error::invalid(
-                    "prior_weight",
-                    format!("must be finite and >= 0, got {prior_weight}"),
-                )
-                .into());
-            }
-            Some(PosePrior::uniform(
-                pose_from_slice(&a.data, "prior")?,
-                prior_weight,
-                prior_weight,
-            ))
-        }
-        None => None,
-    };
-    let model = model.map_or_else(BodyModel::default, |m| m.inner.clone());
+    let init = pose_from_slice(&init.data, "init_pose")?;
     let cam = camera.inner;
     let result = py.detach(|| {
-        fit::fit_pose(
-            &d.data,
-            &cam,
-            &init.data,
-            &model,
-            mask.as_deref(),
-            prior.as_ref(),
-            &cfg,
+        fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.fit(
+            &args.model,
+            &init,
+            args.prior.as_ref(),
         )
     })?;
-    Ok(PyFitResult {
-        result,
-        height: h,
-        width: w,
-    })
+    Ok(args.result(result))
+}
+
+/// `fit_pose` from each row of `init_poses` (K, 22) on the same image, in parallel;
+/// a list of K results, each identical to its own `fit_pose` call.
+#[pyfunction]
+#[pyo3(signature = (depth, camera, init_poses, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
+#[allow(clippy::too_many_arguments)]
+fn fit_poses(
+    py: Python<'_>,
+    depth: &Bound<'_, PyAny>,
+    camera: &PyCamera,
+    init_poses: &Bound<'_, PyAny>,
+    model: Option<&PyBodyModel>,
+    mask: Option<&Bound<'_, PyAny>>,
+    config: Option<&PyFitConfig>,
+    prior: Option<&Bound<'_, PyAny>>,
+    prior_weight: f64,
+) -> PyResult<Vec<PyFitResult>> {
+    let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
+    let a = f64_array(init_poses, "init_poses", Some(2), false)?;
+    if a.shape[1] != NUM_PARAMS {
+        return Err(Error::invalid(
+            "init_poses",
+            format!("expected shape (K, {NUM_PARAMS}), got {:?}", a.shape),
+        )
+        .into());
+    }
+    let inits = a
+        .data
+        .chunks(NUM_PARAMS)
+        .enumerate()
+        .map(|(k, row)| pose_from_slice(row, &format!("init_poses[{k}]")))
+        .collect::<crate::Result<Vec<_>>>()?;
+    let cam = camera.inner;
+    let results = py.detach(|| {
+        fit::fit_poses(
+            &args.depth,
+            &cam,
+            &inits,
+            &args.model,
+            args.mask.as_deref(),
+            args.prior.as_ref(),
+            &args.config,
+        )
+    })?;
+    Ok(results.into_iter().map(|r| args.result(r)).collect())
 }
 
 /// The pose (22,) whose joints best match `joints` (15, 3) (NaN rows are skipped).
@@ -439,6 +520,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyFitResult>()?;
     m.add_class::<PyShapeFitResult>()?;
     m.add_function(wrap_pyfunction!(fit_pose, m)?)?;
+    m.add_function(wrap_pyfunction!(fit_poses, m)?)?;
     m.add_function(wrap_pyfunction!(pose_from_joints, m)?)?;
     Ok(())
 }
