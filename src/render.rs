@@ -187,6 +187,75 @@ impl BodyModel {
     }
 }
 
+/// How badly a rendered body explains an observed one, from depth alone (see
+/// [`BodyModel::depth_discrepancies`]): where both have depth the cost is the depth
+/// difference capped at `cap` metres; an observed pixel with nothing rendered, or a
+/// rendered pixel outside `mask`, costs `cap`. The sum over `cap` × the observed pixel
+/// count (observed = in `mask` with a finite depth > 0); infinite when none is.
+pub fn depth_discrepancy(rendered: &[f32], depth: &[f32], mask: &[bool], cap: f64) -> f64 {
+    let (mut diff, mut penalties, mut observed) = (0.0f64, 0usize, 0usize);
+    for ((&r, &d), &m) in rendered.iter().zip(depth).zip(mask) {
+        let obs = m && d.is_finite() && d > 0.0;
+        let ren = r.is_finite() && r > 0.0;
+        observed += obs as usize;
+        if obs && ren {
+            diff += ((r - d).abs() as f64).min(cap);
+        } else if obs || (ren && !m) {
+            // Observed but not rendered, or rendered outside the foreground (a hole
+            // inside the mask is neither).
+            penalties += 1;
+        }
+    }
+    if observed == 0 {
+        return f64::INFINITY;
+    }
+    (diff + cap * penalties as f64) / (cap * observed as f64)
+}
+
+impl BodyModel {
+    /// [`depth_discrepancy`] of each of `poses` rendered by `camera` against `depth`
+    /// and `mask` (H×W), the poses in parallel.
+    pub fn depth_discrepancies(
+        &self,
+        poses: &[Pose],
+        camera: &Camera,
+        depth: &[f32],
+        mask: &[bool],
+        cap: f64,
+    ) -> Result<Vec<f64>> {
+        let n = camera.width * camera.height;
+        if depth.len() != n || mask.len() != n {
+            return Err(Error::invalid(
+                "depth",
+                format!(
+                    "depth has {} and mask {} pixels, the camera {}×{} = {n}",
+                    depth.len(),
+                    mask.len(),
+                    camera.width,
+                    camera.height
+                ),
+            ));
+        }
+        if !(cap.is_finite() && cap > 0.0) {
+            return Err(Error::invalid(
+                "cap",
+                format!("must be finite and > 0, got {cap}"),
+            ));
+        }
+        poses
+            .par_iter()
+            .map_init(
+                || (vec![0.0f32; n], vec![BACKGROUND_LABEL; n]),
+                |(rendered, labels), pose| {
+                    // Every row is cleared by the renderer.
+                    self.render_depth_into(pose, camera, rendered, labels)?;
+                    Ok(depth_discrepancy(rendered, depth, mask, cap))
+                },
+            )
+            .collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -181,6 +181,50 @@ def test_depth_discrepancy_tells_the_near_leg_from_the_far_one(side_walk):
     assert true < 0.3 and swapped > 1.3 * true, (true, swapped)
 
 
+def _discrepancy_reference(model, pose, depth, mask, cam, cap=0.1):
+    """The definition, in numpy."""
+    rendered = np.asarray(model.render_depth(pose, cam)[0])
+    obs = mask & np.isfinite(depth) & (depth > 0)
+    ren = np.isfinite(rendered) & (rendered > 0)
+    both = obs & ren
+    diff = np.minimum(np.abs(rendered[both] - depth[both]).astype(np.float64), cap).sum()
+    penalties = (ren & ~mask).sum() + (obs & ~ren).sum()
+    return (diff + cap * penalties) / (cap * obs.sum())
+
+
+def test_depth_discrepancies_match_the_definition(side_walk):
+    from depthpose.cloud import foreground_mask
+    from depthpose.pipeline import mirror_view, swap_limbs
+
+    seq, cam, bg = side_walk
+    model = dp.BodyModel()
+    depth = seq["depth"][3].astype(np.float32) / 1000
+    depth[100:110, 150:170] = np.nan  # a hole inside the body
+    mask = foreground_mask(np.nan_to_num(depth), bg)
+    p = seq["poses"][3]
+    poses = np.array([p, swap_limbs(p), mirror_view(p), p + 0.05])
+    got = model.depth_discrepancies(poses, depth, mask, cam)
+    want = [_discrepancy_reference(model, q, depth, mask, cam) for q in poses]
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    got = model.depth_discrepancies(poses, depth, mask, cam, cap=0.03)
+    want = [_discrepancy_reference(model, q, depth, mask, cam, 0.03) for q in poses]
+    np.testing.assert_allclose(got, want, rtol=1e-9)
+    # uint16 millimetres are metres to the native code.
+    mm = np.round(np.nan_to_num(depth) * 1000).astype(np.uint16)
+    np.testing.assert_allclose(
+        model.depth_discrepancies(poses, mm, mask, cam),
+        model.depth_discrepancies(poses, mm.astype(np.float32) / 1000, mask, cam),
+        rtol=1e-5,  # mm → m rounds differently in float32
+    )
+    assert np.isinf(model.depth_discrepancies(poses[:1], depth, np.zeros_like(mask), cam)[0])
+    with pytest.raises(dp.InvalidInputError, match="poses"):
+        model.depth_discrepancies(poses[:, :21], depth, mask, cam)
+    with pytest.raises(dp.InvalidInputError, match="mask"):
+        model.depth_discrepancies(poses, depth, mask[:, :5], cam)
+    with pytest.raises(dp.InvalidInputError, match="cap"):
+        model.depth_discrepancies(poses, depth, mask, cam, cap=0.0)
+
+
 def test_tracker_recovers_from_a_swapped_start(side_walk, templates):
     from depthpose.pipeline import PipelineConfig, swap_limbs
 

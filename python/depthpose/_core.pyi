@@ -254,6 +254,14 @@ class BodyModel:
     def render_depth(
         self, pose: npt.NDArray[np.float64], camera: Camera
     ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int16]]: ...
+    def depth_discrepancies(
+        self,
+        poses: npt.NDArray[np.float64],
+        depth: npt.NDArray[np.generic],
+        mask: npt.NDArray[np.bool_],
+        camera: Camera,
+        cap: float = 0.1,
+    ) -> npt.NDArray[np.float64]: ...
     def superquadric_meshes(
         self, pose: npt.NDArray[np.float64], rings: int = 20, sectors: int = 24
     ) -> list[tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]]: ...

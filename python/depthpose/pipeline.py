@@ -257,20 +257,10 @@ def depth_discrepancy(
     the cost is the depth difference capped at ``cap`` metres, a foreground pixel with
     no body rendered or a rendered pixel outside the foreground costs ``cap``. The sum
     is divided by ``cap`` × the foreground pixel count: 0 = perfect, about 1 or more =
-    unrelated. Unlike the silhouette, the depth tells the near limb from the far one."""
-    rendered, _ = model.render_depth(np.asarray(pose, np.float64), camera)
-    rendered = np.asarray(rendered)
-    obs = mask & np.isfinite(depth) & (depth > 0)
-    n = int(obs.sum())
-    if n == 0:
-        return float("inf")
-    ren = np.isfinite(rendered) & (rendered > 0)
-    both = obs & ren
-    diff = np.minimum(np.abs(rendered[both] - depth[both]), cap).sum()
-    # Rendered where the image shows something else (not a hole inside the mask).
-    outside = (ren & ~mask).sum()
-    missing = (obs & ~ren).sum()
-    return float((diff + cap * (outside + missing)) / (cap * n))
+    unrelated. Unlike the silhouette, the depth tells the near limb from the far one.
+    (``BodyModel.depth_discrepancies`` scores many poses at once, in parallel.)"""
+    poses = np.asarray(pose, np.float64).reshape(1, -1)
+    return float(model.depth_discrepancies(poses, depth, mask, camera, cap)[0])
 
 
 def _model(model):
@@ -405,6 +395,11 @@ class PoseEstimator:
         """:func:`depth_discrepancy` of ``pose`` with this estimator's model and camera."""
         return depth_discrepancy(self.model, pose, depth, mask, self.camera)
 
+    def discrepancies(self, poses, depth: np.ndarray, mask: np.ndarray) -> np.ndarray:
+        """:meth:`discrepancy` of each of ``poses``, rendered in parallel."""
+        poses = np.asarray(poses, np.float64).reshape(-1, 22)
+        return np.asarray(self.model.depth_discrepancies(poses, depth, mask, self.camera))
+
     def hypotheses(self, depth: np.ndarray, mask: np.ndarray) -> list[np.ndarray]:
         """Start poses from the template search: each of the best ``candidates``
         templates, its left/right-swapped pose and the mirror images of both (the
@@ -433,7 +428,8 @@ class PoseEstimator:
         starts = self.hypotheses(depth, mask)
         if timings is not None:
             timings["templates"] = time.perf_counter()
-        ranked = sorted(starts, key=lambda q: self.discrepancy(q, depth, mask))
+        order = np.argsort(self.discrepancies(starts, depth, mask), kind="stable")
+        ranked = [starts[i] for i in order]
         chosen = [*list(extra), *ranked[: max(1, self.config.hypotheses)]]
         fits = self._fits(
             depth,
@@ -442,9 +438,9 @@ class PoseEstimator:
             iterations=self.config.candidate_iterations,
             stride=self.config.candidate_stride,
         )
-        scores = [self.discrepancy(f.pose, depth, mask) for f in fits]
+        scores = self.discrepancies([f.pose for f in fits], depth, mask)
         k = int(np.argmin(scores))
-        best, best_score = fits[k], scores[k]
+        best, best_score = fits[k], float(scores[k])
         final = self._fit(depth, mask, best.pose)
         final_score = self.discrepancy(final.pose, depth, mask)
         if final_score <= best_score:

@@ -288,6 +288,48 @@ impl PyBodyModel {
         Ok((to_numpy(py, r, &[n]), to_numpy(py, j, &[n, NUM_PARAMS])))
     }
 
+    /// How badly each of `poses` (K, 22) explains the observed body in `depth` (H, W;
+    /// metres, or uint16 millimetres) within `mask` (H, W bool): rendered and compared
+    /// pixel by pixel (depth difference capped at `cap` metres; a foreground pixel with
+    /// nothing rendered or a rendered pixel outside the mask costs `cap`), divided by
+    /// `cap` × the foreground pixel count. (K,) float64, the poses rendered in parallel.
+    #[pyo3(signature = (poses, depth, mask, camera, cap=0.1))]
+    fn depth_discrepancies<'py>(
+        &self,
+        py: Python<'py>,
+        poses: &Bound<'py, PyAny>,
+        depth: &Bound<'py, PyAny>,
+        mask: &Bound<'py, PyAny>,
+        camera: &PyCamera,
+        cap: f64,
+    ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let d = depth_array(depth, "depth")?;
+        let (h, w) = (d.shape[0], d.shape[1]);
+        camera.inner.check_image("depth", h, w)?;
+        let m = bool_array(mask, "mask", &[h, w])?;
+        let a = f64_array(poses, "poses", Some(2), false)?;
+        if a.shape[1] != NUM_PARAMS {
+            return Err(Error::invalid(
+                "poses",
+                format!("expected shape (K, {NUM_PARAMS}), got {:?}", a.shape),
+            )
+            .into());
+        }
+        let poses = a
+            .data
+            .chunks(NUM_PARAMS)
+            .enumerate()
+            .map(|(k, row)| pose_from_slice(row, &format!("poses[{k}]")))
+            .collect::<crate::Result<Vec<_>>>()?;
+        let cam = camera.inner;
+        let out = py.detach(|| {
+            self.inner
+                .depth_discrepancies(&poses, &cam, &d.data, &m, cap)
+        })?;
+        let k = out.len();
+        Ok(to_numpy(py, out, &[k]))
+    }
+
     /// Depth (H, W) float32 metres (0 = background) and part labels (H, W) int16
     /// (-1 = background) of the posed body seen by `camera`.
     fn render_depth<'py>(
