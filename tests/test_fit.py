@@ -144,6 +144,26 @@ def test_fit_poses_equals_separate_fits():
         dp.fit_poses(np.zeros_like(depth), CAM, inits)
 
 
+def test_resumed_fit_equals_the_longer_fit():
+    model = BodyModel()
+    truth = natural_pose(model)
+    depth, _ = model.render_depth(truth, CAM)
+    init = perturbed(model, truth, np.random.default_rng(4))
+    brief = dp.fit_pose(depth, CAM, init, model=model, config={"max_iterations": 3})
+    long = dp.fit_pose(depth, CAM, init, model=model, config={"max_iterations": 8})
+    resumed = dp.fit_pose(
+        depth, CAM, brief.pose, model=model, config={"max_iterations": 8}, resume=brief
+    )
+    assert np.array_equal(resumed.pose, long.pose)
+    assert np.array_equal(resumed.labels, long.labels)
+    assert resumed.iterations == long.iterations and resumed.energy == long.energy
+    small = dp.Camera(285.71, 285.71, 79.5, 59.5, 160, 120)
+    with pytest.raises(dp.InvalidInputError, match="resume"):
+        dp.fit_pose(depth[::2, ::2].copy(), small, brief.pose, model=model, resume=brief)
+    with pytest.raises(TypeError):
+        dp.fit_pose(depth, CAM, brief.pose, resume="brief")
+
+
 def test_prior_holds_the_pose():
     model = BodyModel()
     truth = natural_pose(model)

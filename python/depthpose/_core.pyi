@@ -379,6 +379,7 @@ def fit_pose(
     config: FitConfig | None = None,
     prior: npt.NDArray[np.float64] | None = None,
     prior_weight: float = 100.0,
+    resume: FitResult | None = None,
 ) -> FitResult: ...
 def fit_poses(
     depth: npt.NDArray[np.generic],

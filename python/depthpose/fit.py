@@ -50,6 +50,7 @@ def fit_pose(
     config: None | FitConfig | Mapping[str, Any] = None,
     prior: np.ndarray | None = None,
     prior_weight: float = 100.0,
+    resume: FitResult | None = None,
 ) -> FitResult:
     """Fit the body to `depth` (H, W; float metres or uint16 mm) from `init_pose` (22,).
 
@@ -58,6 +59,13 @@ def fit_pose(
     `FitResult` with `pose`, `joints` (15, 3), `labels` (H, W) int16 (-1 = background or
     outlier), `energy`, `energy_trace`, `iterations`, `converged`, `reason`,
     `part_counts` and `outliers`.
+
+    `resume`: an earlier `FitResult` on this image (e.g. a brief fit with a small
+    `max_iterations`) whose EM should go on: it continues from `init_pose` (normally
+    `resume.pose`) with `resume`'s labels and iteration count, so the outlier distance
+    keeps annealing where it was and `max_iterations` counts the earlier iterations.
+    Continuing a full-resolution fit that hit its iteration limit gives exactly the
+    longer fit.
     """
     return _fit_pose(
         depth,
@@ -68,6 +76,7 @@ def fit_pose(
         config=_config(config),
         prior=None if prior is None else np.asarray(prior),
         prior_weight=prior_weight,
+        resume=resume,
     )
 
 

@@ -349,7 +349,7 @@ class PoseEstimator:
             kwargs["stride"] = stride
         return FitConfig(**kwargs)
 
-    def _fit(self, depth, mask, init, *, iterations=None, prior=None, stride=None):
+    def _fit(self, depth, mask, init, *, iterations=None, prior=None, stride=None, resume=None):
         from .fit import fit_pose
 
         return fit_pose(
@@ -361,6 +361,7 @@ class PoseEstimator:
             config=self._fit_config(iterations, stride),
             prior=prior,
             prior_weight=self.config.prior_weight,
+            resume=resume,
         )
 
     def _fits(self, depth, mask, inits, *, iterations=None, stride=None):
@@ -423,8 +424,8 @@ class PoseEstimator:
     def search(self, depth, mask, *, extra=(), timings=None):
         """Best fit from the template hypotheses (and ``extra`` start poses, always
         refined): all ranked by their depth discrepancy, the best ``hypotheses`` refined
-        briefly by EM, the one explaining the depth best refined fully. Returns the fit
-        and its discrepancy."""
+        briefly by EM (in parallel), the one explaining the depth best refined fully (its
+        EM continued). Returns the fit and its discrepancy."""
         starts = self.hypotheses(depth, mask)
         if timings is not None:
             timings["templates"] = time.perf_counter()
@@ -441,7 +442,9 @@ class PoseEstimator:
         scores = self.discrepancies([f.pose for f in fits], depth, mask)
         k = int(np.argmin(scores))
         best, best_score = fits[k], float(scores[k])
-        final = self._fit(depth, mask, best.pose)
+        # The winner's EM goes on where its brief fit stopped (same labels, the outlier
+        # distance still annealing) rather than starting over.
+        final = self._fit(depth, mask, best.pose, resume=best)
         final_score = self.discrepancy(final.pose, depth, mask)
         if final_score <= best_score:
             best, best_score = final, final_score

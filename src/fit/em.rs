@@ -397,6 +397,31 @@ pub fn hard_em(
     prior: Option<&PosePrior>,
     config: &EmConfig,
 ) -> Result<EmResult> {
+    hard_em_from(model, points, graph, init, None, prior, config)
+}
+
+/// An EM run to continue (see [`hard_em_from`]): the per-point labels it ended with
+/// (segment 0..15 or [`OUTLIER`]) and the iterations it ran.
+#[derive(Debug, Clone, Copy)]
+pub struct EmResume<'a> {
+    pub labels: &'a [i32],
+    pub iterations: usize,
+}
+
+/// [`hard_em`], or with `resume` its continuation: from `init` (the pose that run
+/// ended with) and its labels, at its iteration count (so τ continues its annealing
+/// and `max_iterations` counts the earlier iterations too), without a new initial
+/// E-step. Continuing a run that stopped at its iteration limit gives the run that
+/// would have gone on.
+pub fn hard_em_from(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    graph: &PixelGraph,
+    init: &Pose,
+    resume: Option<EmResume<'_>>,
+    prior: Option<&PosePrior>,
+    config: &EmConfig,
+) -> Result<EmResult> {
     config.validate()?;
     let n = points.len();
     if n == 0 {
@@ -419,35 +444,60 @@ pub fn hard_em(
     let prior_cost = |p: &Pose| prior.map_or(0.0, |pr| pr.cost(p));
 
     let mut pose = BodyModel::clamp_pose(init);
-    let mut tau = config.outlier_distance_at(0);
+    let mut iterations = resume.map_or(0, |r| r.iterations);
+    let mut tau = config.outlier_distance_at(iterations);
     unary_costs(model, points, &pose, config, tau, &mut unary);
-    // Initial labels: the cheapest label of each point, then the CRF.
-    let mut labels: Vec<i32> = unary
-        .chunks_exact(NUM_LABELS)
-        .map(|row| {
-            (0..NUM_LABELS)
-                .min_by(|&a, &b| row[a].total_cmp(&row[b]))
-                .unwrap_or(0) as i32
-        })
-        .collect();
-    let lab = solver.alpha_expansion(
-        &problem(&unary, &graph.edges, &weights),
-        Some(&labels),
-        &moves,
-    )?;
-    labels = lab.labels;
+    let mut labels: Vec<i32> = match resume {
+        Some(r) => {
+            if r.labels.len() != n {
+                return Err(Error::invalid(
+                    "resume",
+                    format!("has {} labels for {n} points", r.labels.len()),
+                ));
+            }
+            if let Some(i) = r.labels.iter().position(|&l| !(0..=OUTLIER).contains(&l)) {
+                return Err(Error::invalid(
+                    "resume",
+                    format!(
+                        "label {} of point {i} is not a part or the outlier",
+                        r.labels[i]
+                    ),
+                ));
+            }
+            r.labels.to_vec()
+        }
+        None => {
+            // Initial labels: the cheapest label of each point, then the CRF.
+            let cheapest: Vec<i32> = unary
+                .chunks_exact(NUM_LABELS)
+                .map(|row| {
+                    (0..NUM_LABELS)
+                        .min_by(|&a, &b| row[a].total_cmp(&row[b]))
+                        .unwrap_or(0) as i32
+                })
+                .collect();
+            solver
+                .alpha_expansion(
+                    &problem(&unary, &graph.edges, &weights),
+                    Some(&cheapest),
+                    &moves,
+                )?
+                .labels
+        }
+    };
     let mut energy = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&pose);
     let mut trace = vec![energy];
     let mut termination = EmTermination::MaxIterations;
-    let mut iterations = 0;
     let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
+    let mut first_pass = true;
     while iterations < config.max_iterations {
         iterations += 1;
         let energy_at_start = energy;
-        // M-step.
-        if iterations > 1 {
+        // M-step (the objective was built for the first one).
+        if !first_pass {
             objective.relabel(&labels, config.point_cost(tau));
         }
+        first_pass = false;
         let mut new_pose = pose;
         let report = {
             let mut with_prior = WithPrior {

@@ -18,7 +18,10 @@ use crate::error::{Error, Result};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-pub use em::{hard_em, label_points, EmConfig, EmResult, EmTermination, PointLabels, OUTLIER};
+pub use em::{
+    hard_em, hard_em_from, label_points, EmConfig, EmResult, EmResume, EmTermination, PointLabels,
+    OUTLIER,
+};
 pub use ik::pose_from_joints;
 pub use lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, Termination};
 pub use objective::Loss;
@@ -201,9 +204,72 @@ impl FitProblem {
         init: &Pose,
         prior: Option<&PosePrior>,
     ) -> Result<FitResult> {
+        self.fit_from(model, init, None, prior)
+    }
+
+    /// The labels of `previous` (a fit of this image) for the points the EM runs on
+    /// (the sub-sampled ones with a stride): its label at each point's pixel, the
+    /// outlier label where it has none.
+    fn resume_labels(&self, previous: &FitResult) -> Result<Vec<i32>> {
+        let (w, h) = (self.camera.width, self.camera.height);
+        if previous.labels.len() != w * h {
+            return Err(Error::invalid(
+                "resume",
+                format!(
+                    "its labels have {} pixels, this {h}x{w} image {}",
+                    previous.labels.len(),
+                    w * h
+                ),
+            ));
+        }
+        let label = |px: usize| match previous.labels[px] {
+            l if l < 0 => OUTLIER,
+            l => l as i32,
+        };
+        Ok(match &self.sub {
+            None => self
+                .cloud
+                .pixels
+                .iter()
+                .map(|&px| label(px as usize))
+                .collect(),
+            Some((sub_cloud, sub_cam, _)) => {
+                let s = self.config.stride;
+                let sw = sub_cam.width;
+                sub_cloud
+                    .pixels
+                    .iter()
+                    .map(|&px| {
+                        let (r, c) = (px as usize / sw, px as usize % sw);
+                        label(s * r * w + s * c)
+                    })
+                    .collect()
+            }
+        })
+    }
+
+    /// [`Self::fit`], or with `resume` (an earlier fit of this image, e.g. a brief
+    /// one) the continuation of its EM from `init` (normally `resume`'s pose) with its
+    /// labels and iteration count (see [`em::hard_em_from`]): `max_iterations` then
+    /// counts its iterations too.
+    pub fn fit_from(
+        &self,
+        model: &BodyModel,
+        init: &Pose,
+        resume: Option<&FitResult>,
+        prior: Option<&PosePrior>,
+    ) -> Result<FitResult> {
         let (cloud, graph, config) = (&self.cloud, &self.graph, &self.config);
+        let resume_labels = resume.map(|r| self.resume_labels(r)).transpose()?;
+        let resume = resume_labels
+            .as_deref()
+            .zip(resume)
+            .map(|(labels, r)| EmResume {
+                labels,
+                iterations: r.iterations,
+            });
         let Some((sub_cloud, sub_cam, sub_graph)) = &self.sub else {
-            let em = hard_em(model, &cloud.points, graph, init, prior, &config.em)?;
+            let em = hard_em_from(model, &cloud.points, graph, init, resume, prior, &config.em)?;
             return Ok(FitResult {
                 pose: em.pose,
                 joints: model.joints(&em.pose),
@@ -223,11 +289,12 @@ impl FitProblem {
             weights: p.weights.map(|w| w / (s * s) as f64),
             ..*p
         });
-        let em = hard_em(
+        let em = hard_em_from(
             model,
             &sub_cloud.points,
             sub_graph,
             init,
+            resume,
             scaled_prior.as_ref(),
             &config.em,
         )?;

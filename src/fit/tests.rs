@@ -269,3 +269,42 @@ fn fit_poses_equals_separate_fits() {
         }
     }
 }
+
+/// Continuing a fit that stopped at its iteration limit gives the longer fit (pose,
+/// labels, energy, iteration count); bad resume data is refused.
+#[test]
+fn resumed_fit_equals_the_longer_fit() {
+    let model = BodyModel::default();
+    let cam = Camera::itop();
+    let truth = natural_pose();
+    let (depth, _) = model.render_depth(&truth, &cam);
+    let init = perturbed(&truth, 3, 20f64.to_radians(), 0.1);
+    let config = |max_iterations| {
+        let mut c = FitConfig::default();
+        c.em.max_iterations = max_iterations;
+        c
+    };
+    let problem = FitProblem::new(&depth, &cam, None, &config(8)).unwrap();
+    let long = problem.fit(&model, &init, None).unwrap();
+    let brief = FitProblem::new(&depth, &cam, None, &config(3))
+        .unwrap()
+        .fit(&model, &init, None)
+        .unwrap();
+    assert_eq!(brief.iterations, 3);
+    let resumed = problem
+        .fit_from(&model, &brief.pose, Some(&brief), None)
+        .unwrap();
+    assert_eq!(resumed.pose, long.pose);
+    assert_eq!(resumed.labels, long.labels);
+    assert_eq!(resumed.energy, long.energy);
+    assert_eq!(resumed.iterations, long.iterations);
+    assert_eq!(resumed.termination, long.termination);
+    // The resumed trace is the tail of the long one.
+    let tail = &long.energy_trace[long.energy_trace.len() - resumed.energy_trace.len()..];
+    assert_eq!(resumed.energy_trace, tail);
+    // Labels of another image size.
+    let mut other = brief.clone();
+    other.labels.pop();
+    let err = problem.fit_from(&model, &brief.pose, Some(&other), None);
+    assert!(matches!(err, Err(Error::InvalidArgument { ref name, .. }) if name == "resume"));
+}

@@ -407,9 +407,11 @@ impl FitArgs {
     }
 }
 
-/// Fits the body to the depth image from `init_pose` (hard EM: CRF labels + LM).
+/// Fits the body to the depth image from `init_pose` (hard EM: CRF labels + LM);
+/// with `resume` (an earlier result on this image) the EM continues from its labels
+/// and iteration count.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
+#[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0, resume=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit_pose(
     py: Python<'_>,
@@ -421,15 +423,18 @@ fn fit_pose(
     config: Option<&PyFitConfig>,
     prior: Option<&Bound<'_, PyAny>>,
     prior_weight: f64,
+    resume: Option<PyRef<'_, PyFitResult>>,
 ) -> PyResult<PyFitResult> {
     let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
     let init = f64_array(init_pose, "init_pose", Some(1), false)?;
     let init = pose_from_slice(&init.data, "init_pose")?;
     let cam = camera.inner;
+    let resume = resume.as_ref().map(|r| &r.result);
     let result = py.detach(|| {
-        fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.fit(
+        fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.fit_from(
             &args.model,
             &init,
+            resume,
             args.prior.as_ref(),
         )
     })?;
