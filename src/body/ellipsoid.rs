@@ -509,6 +509,33 @@ impl SortedPlacement {
         self.level(y) >= b.level || y[0] * y[0] + y[1] * y[1] + y[2] * y[2] >= b.norm2
     }
 
+    /// Splits camera-frame points by the truncation distance `t`: `far(i)` for each
+    /// `(i, p)` of `items` whose distance lower bound is at least `t` (its exact
+    /// distance is not needed), and the others, in local coordinates, written to the
+    /// front of `near` and returned (for the batched distance queries). `near` must
+    /// hold every item.
+    #[inline]
+    pub fn split_near<'n>(
+        &self,
+        t: f64,
+        items: impl Iterator<Item = (usize, [f64; 3])>,
+        mut far: impl FnMut(usize),
+        near: &'n mut [(usize, [f64; 3])],
+    ) -> &'n [(usize, [f64; 3])] {
+        let beyond = self.beyond(t);
+        let mut m = 0;
+        for (i, p) in items {
+            let y = self.local(&p);
+            if self.is_beyond(&beyond, &y) {
+                far(i);
+            } else {
+                near[m] = (i, y);
+                m += 1;
+            }
+        }
+        &near[..m]
+    }
+
     /// Signed distance (negative inside) of local point `y` (from [`Self::local`]).
     #[inline]
     pub fn signed_distance_local(&self, y: &[f64; 3]) -> f64 {

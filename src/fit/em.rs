@@ -264,23 +264,19 @@ pub fn unary_costs(
         .for_each(|(u, pts)| {
             let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
             let buf = to_f64(pts, &mut buf);
-            let mut near = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
+            let mut near_buf = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
             for (k, e) in geo.segments.iter().enumerate() {
                 // A lower bound of the distance at or beyond the truncation means the
                 // cost is the cap, exactly what the exact distance would give; only
                 // the points nearer than that need the exact (iterative) distance.
-                let far = e.beyond(pc.truncation);
-                let mut m = 0;
-                for (i, p) in buf.iter().enumerate() {
-                    let y = e.local(p);
-                    if e.is_beyond(&far, &y) {
-                        u[i * NUM_LABELS + k] = cap;
-                    } else {
-                        near[m] = (i, y);
-                        m += 1;
-                    }
-                }
-                e.signed_distances_batched(near[..m].iter().copied(), |i, d| {
+                let items = buf.iter().copied().enumerate();
+                let near = e.split_near(
+                    pc.truncation,
+                    items,
+                    |i| u[i * NUM_LABELS + k] = cap,
+                    &mut near_buf,
+                );
+                e.signed_distances_batched(near.iter().copied(), |i, d| {
                     u[i * NUM_LABELS + k] = pc.cost(d)
                 });
             }

@@ -212,11 +212,14 @@ impl<'a> PointObjective<'a> {
         self.evaluated = None;
     }
 
-    /// Distances, normals and chunk costs at `pose` (kept until another pose comes).
+    /// Whether the kept evaluation is at `pose`.
+    fn evaluated_at(&self, pose: &Pose) -> bool {
+        self.evaluated.as_ref() == Some(pose)
+    }
+
+    /// Distances, normals and chunk costs at `pose` with its geometry `geo` (kept until
+    /// another pose comes).
     fn evaluate(&mut self, pose: &Pose, geo: &PoseGeometry) {
-        if self.evaluated.as_ref() == Some(pose) {
-            return;
-        }
         let (points, pc) = (self.points, self.point_cost);
         self.order
             .par_chunks(CHUNK_POINTS)
@@ -225,22 +228,18 @@ impl<'a> PointObjective<'a> {
             .zip(self.normal.par_chunks_mut(CHUNK_POINTS))
             .zip(self.partial_costs.par_iter_mut())
             .for_each(|((((idx, seg), dist), normal), cost)| {
-                let mut near = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
+                let mut near_buf = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
                 for (k, run) in segment_runs(seg) {
                     let e = &geo.segments[k];
-                    let far = e.beyond(pc.truncation);
-                    let mut m = 0;
-                    for r in run {
-                        let y = e.local(&vec3(&points[idx[r] as usize]));
-                        if e.is_beyond(&far, &y) {
-                            // Truncated for sure: constant cost, zero weight.
-                            dist[r] = f64::INFINITY;
-                        } else {
-                            near[m] = (r, y);
-                            m += 1;
-                        }
-                    }
-                    e.distances_and_normals_batched(near[..m].iter().copied(), |r, d, n| {
+                    let items = run.map(|r| (r, vec3(&points[idx[r] as usize])));
+                    // Truncated for sure: constant cost, zero weight.
+                    let near = e.split_near(
+                        pc.truncation,
+                        items,
+                        |r| dist[r] = f64::INFINITY,
+                        &mut near_buf,
+                    );
+                    e.distances_and_normals_batched(near.iter().copied(), |r, d, n| {
                         dist[r] = d;
                         normal[r] = n;
                     });
@@ -275,7 +274,7 @@ fn vec3(p: &[f32; 3]) -> [f64; 3] {
 
 impl PoseObjective for PointObjective<'_> {
     fn cost(&mut self, pose: &Pose) -> f64 {
-        if self.evaluated.as_ref() != Some(pose) {
+        if !self.evaluated_at(pose) {
             let geo = PoseGeometry::new(self.model, pose);
             self.evaluate(pose, &geo);
         }
@@ -284,7 +283,9 @@ impl PoseObjective for PointObjective<'_> {
 
     fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
         let geo = PoseGeometry::new(self.model, pose);
-        self.evaluate(pose, &geo);
+        if !self.evaluated_at(pose) {
+            self.evaluate(pose, &geo);
+        }
         let (points, pc) = (self.points, self.point_cost);
         self.chunks
             .par_iter_mut()
