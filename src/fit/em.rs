@@ -348,6 +348,70 @@ impl PointLabels {
     }
 }
 
+/// The E-step's CRF over one point set, its buffers reused across a fit's E-steps: the
+/// edge weights, the unary terms at the current pose and τ, and the expansion solver.
+struct EStep<'g> {
+    graph: &'g PixelGraph,
+    weights: Vec<f64>,
+    unary: Vec<f64>,
+    solver: CrfSolver<f64>,
+    moves: MoveConfig,
+}
+
+impl<'g> EStep<'g> {
+    fn new(graph: &'g PixelGraph, n: usize, config: &EmConfig) -> Result<Self> {
+        let mut weights = Vec::with_capacity(graph.len());
+        edge_weights(graph, config, &mut weights);
+        Ok(EStep {
+            graph,
+            weights,
+            unary: vec![0.0; n * NUM_LABELS],
+            solver: CrfSolver::<f64>::new(n, &graph.edges)?,
+            moves: MoveConfig {
+                max_cycles: config.expansion_cycles,
+            },
+        })
+    }
+
+    /// The unary terms of `points` at `pose` and outlier distance `tau`.
+    fn set_pose(
+        &mut self,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        pose: &Pose,
+        config: &EmConfig,
+        tau: f64,
+    ) {
+        unary_costs(model, points, pose, config, tau, &mut self.unary);
+    }
+
+    /// The CRF energy of `labels` (without the prior).
+    fn energy(&self, labels: &[i32]) -> f64 {
+        crf_energy(&self.unary, &self.graph.edges, &self.weights, labels)
+    }
+
+    /// The cheapest label of each point, ignoring the pairwise terms.
+    fn cheapest_labels(&self) -> Vec<i32> {
+        self.unary
+            .chunks_exact(NUM_LABELS)
+            .map(|row| {
+                (0..NUM_LABELS)
+                    .min_by(|&a, &b| row[a].total_cmp(&row[b]))
+                    .unwrap_or(0) as i32
+            })
+            .collect()
+    }
+
+    /// Alpha-expansion from `init`.
+    fn expand(&mut self, init: &[i32]) -> Result<Vec<i32>> {
+        let p = problem(&self.unary, &self.graph.edges, &self.weights);
+        Ok(self
+            .solver
+            .alpha_expansion(&p, Some(init), &self.moves)?
+            .labels)
+    }
+}
+
 /// One E-step on its own: the CRF labels of `points` for a fixed `pose` at outlier
 /// distance `tau`, by alpha-expansion from `init` (labels in `0..NUM_LABELS`, the outlier
 /// label being [`NUM_SEGMENTS`]). Returns the labels and the CRF energy. Used to label
@@ -369,18 +433,11 @@ pub fn label_points(
             format!("has {} labels for {n} points", init.len()),
         ));
     }
-    let mut weights = Vec::with_capacity(graph.len());
-    edge_weights(graph, config, &mut weights);
-    let mut unary = vec![0.0; n * NUM_LABELS];
-    unary_costs(model, points, pose, config, tau, &mut unary);
-    let mut solver = CrfSolver::<f64>::new(n, &graph.edges)?;
-    let moves = MoveConfig {
-        max_cycles: config.expansion_cycles,
-    };
-    let lab =
-        solver.alpha_expansion(&problem(&unary, &graph.edges, &weights), Some(init), &moves)?;
-    let energy = crf_energy(&unary, &graph.edges, &weights, &lab.labels);
-    Ok((PointLabels::new(lab.labels), energy))
+    let mut crf = EStep::new(graph, n, config)?;
+    crf.set_pose(model, points, pose, config, tau);
+    let labels = crf.expand(init)?;
+    let energy = crf.energy(&labels);
+    Ok((PointLabels::new(labels), energy))
 }
 
 /// Runs hard EM on `points` (with their neighbourhood `graph`) from `init`. `prior`, if
@@ -429,20 +486,14 @@ pub fn hard_em_from(
             format!("parameter {i} is not finite"),
         ));
     }
-    let mut weights = Vec::with_capacity(graph.len());
-    edge_weights(graph, config, &mut weights);
-    let mut solver = CrfSolver::<f64>::new(n, &graph.edges)?;
+    let mut crf = EStep::new(graph, n, config)?;
     let mut lm = LevenbergMarquardt::new(config.lm)?;
-    let moves = MoveConfig {
-        max_cycles: config.expansion_cycles,
-    };
-    let mut unary = vec![0.0; n * NUM_LABELS];
     let prior_cost = |p: &Pose| prior.map_or(0.0, |pr| pr.cost(p));
 
     let mut pose = BodyModel::clamp_pose(init);
     let mut iterations = resume.map_or(0, |r| r.iterations);
     let mut tau = config.outlier_distance_at(iterations);
-    unary_costs(model, points, &pose, config, tau, &mut unary);
+    crf.set_pose(model, points, &pose, config, tau);
     let mut labels: Vec<i32> = match resume {
         Some(r) => {
             if r.labels.len() != n {
@@ -464,24 +515,11 @@ pub fn hard_em_from(
         }
         None => {
             // Initial labels: the cheapest label of each point, then the CRF.
-            let cheapest: Vec<i32> = unary
-                .chunks_exact(NUM_LABELS)
-                .map(|row| {
-                    (0..NUM_LABELS)
-                        .min_by(|&a, &b| row[a].total_cmp(&row[b]))
-                        .unwrap_or(0) as i32
-                })
-                .collect();
-            solver
-                .alpha_expansion(
-                    &problem(&unary, &graph.edges, &weights),
-                    Some(&cheapest),
-                    &moves,
-                )?
-                .labels
+            let cheapest = crf.cheapest_labels();
+            crf.expand(&cheapest)?
         }
     };
-    let mut energy = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&pose);
+    let mut energy = crf.energy(&labels) + prior_cost(&pose);
     let mut trace = vec![energy];
     let mut termination = EmTermination::MaxIterations;
     let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
@@ -508,38 +546,33 @@ pub fn hard_em_from(
         // E(pose, τ), so the energy still never increases (checked, not assumed).
         let next_tau = config.outlier_distance_at(iterations);
         if pose_moved {
-            unary_costs(model, points, &new_pose, config, next_tau, &mut unary);
-            let e = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&new_pose);
+            crf.set_pose(model, points, &new_pose, config, next_tau);
+            let e = crf.energy(&labels) + prior_cost(&new_pose);
             if e <= energy {
                 pose = new_pose;
                 energy = e;
                 tau = next_tau;
             } else {
                 // Cannot happen in exact arithmetic; keep the better state.
-                unary_costs(model, points, &pose, config, tau, &mut unary);
+                crf.set_pose(model, points, &pose, config, tau);
             }
             trace.push(energy);
         }
         if next_tau != tau {
             tau = next_tau;
-            unary_costs(model, points, &pose, config, tau, &mut unary);
-            energy = crf_energy(&unary, &graph.edges, &weights, &labels) + prior_cost(&pose);
+            crf.set_pose(model, points, &pose, config, tau);
+            energy = crf.energy(&labels) + prior_cost(&pose);
         }
         // E-step.
-        let lab = solver.alpha_expansion(
-            &problem(&unary, &graph.edges, &weights),
-            Some(&labels),
-            &moves,
-        )?;
-        let changed = lab
-            .labels
+        let new_labels = crf.expand(&labels)?;
+        let changed = new_labels
             .iter()
             .zip(&labels)
             .filter(|(a, b)| a != b)
             .count();
-        let e = crf_energy(&unary, &graph.edges, &weights, &lab.labels) + prior_cost(&pose);
+        let e = crf.energy(&new_labels) + prior_cost(&pose);
         if e <= energy {
-            labels = lab.labels;
+            labels = new_labels;
             energy = e;
         }
         trace.push(energy);
