@@ -157,6 +157,23 @@ def test_resumed_fit_equals_the_longer_fit():
     assert np.array_equal(resumed.pose, long.pose)
     assert np.array_equal(resumed.labels, long.labels)
     assert resumed.iterations == long.iterations and resumed.energy == long.energy
+    # The batch continues each of its starts the same way.
+    other = dp.fit_pose(depth, CAM, truth, model=model, config={"max_iterations": 3})
+    batch = dp.fit_poses(
+        depth,
+        CAM,
+        np.array([brief.pose, other.pose]),
+        model=model,
+        config={"max_iterations": 8},
+        resume=[brief, other],
+    )
+    assert np.array_equal(batch[0].pose, long.pose) and np.array_equal(batch[0].labels, long.labels)
+    alone = dp.fit_pose(
+        depth, CAM, other.pose, model=model, config={"max_iterations": 8}, resume=other
+    )
+    assert np.array_equal(batch[1].pose, alone.pose)
+    with pytest.raises(dp.InvalidInputError, match="resume"):
+        dp.fit_poses(depth, CAM, np.array([brief.pose]), resume=[brief, other])
     small = dp.Camera(285.71, 285.71, 79.5, 59.5, 160, 120)
     with pytest.raises(dp.InvalidInputError, match="resume"):
         dp.fit_pose(depth[::2, ::2].copy(), small, brief.pose, model=model, resume=brief)

@@ -391,6 +391,7 @@ def fit_poses(
     config: FitConfig | None = None,
     prior: npt.NDArray[np.float64] | None = None,
     prior_weight: float = 100.0,
+    resume: list[FitResult] | None = None,
 ) -> list[FitResult]: ...
 def pose_from_joints(
     joints: npt.NDArray[np.float64],

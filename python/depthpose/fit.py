@@ -90,12 +90,14 @@ def fit_poses(
     config: None | FitConfig | Mapping[str, Any] = None,
     prior: np.ndarray | None = None,
     prior_weight: float = 100.0,
+    resume: Sequence[FitResult] | None = None,
 ) -> list[FitResult]:
     """`fit_pose` from each of `init_poses` ((K, 22), K ≥ 1) on the same image.
 
     The foreground cloud and its graph are built once and the K fits run in parallel
     (one fit's work is mostly sequential), so on several cores this is much faster than
-    K `fit_pose` calls; each result is identical to its own `fit_pose` call.
+    K `fit_pose` calls; each result is identical to its own `fit_pose` call. `resume`:
+    K earlier results, the k-th continued from `init_poses[k]` (see `fit_pose`).
     """
     return _fit_poses(
         depth,
@@ -106,6 +108,7 @@ def fit_poses(
         config=_config(config),
         prior=None if prior is None else np.asarray(prior),
         prior_weight=prior_weight,
+        resume=None if resume is None else list(resume),
     )
 
 

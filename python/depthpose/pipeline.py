@@ -56,8 +56,12 @@ class PipelineConfig:
     candidates: int = 5
     #: Hypotheses (after ranking all by :func:`depth_discrepancy`) refined by EM.
     hypotheses: int = 4
-    #: EM iterations for each candidate before choosing, and for the winner after.
+    #: EM iterations for each candidate before choosing.
     candidate_iterations: int = 3
+    #: The best this many candidate fits (by :func:`depth_discrepancy`) are then refined
+    #: fully, in parallel, and the best of those kept. More finals is more accurate
+    #: (docs/pipeline.md) and, beyond the number of cores, slower.
+    finals: int = 2
     #: Pixel stride (``FitConfig``'s ``stride``) of those brief candidate fits; the
     #: winner's full refinement always uses every pixel. 2 makes ``estimate`` about
     #: 20 % faster but tracks less well (docs/pipeline.md), hence 1.
@@ -122,6 +126,7 @@ class PipelineConfig:
 
         count("candidates", 1)
         count("hypotheses", 0)
+        count("finals", 1)
         count("candidate_iterations", 1)
         count("track_iterations", 1)
         for name in ("track_stride", "candidate_stride"):
@@ -364,7 +369,7 @@ class PoseEstimator:
             resume=resume,
         )
 
-    def _fits(self, depth, mask, inits, *, iterations=None, stride=None):
+    def _fits(self, depth, mask, inits, *, iterations=None, stride=None, resume=None):
         """:meth:`_fit` from each of ``inits``, in parallel (no prior)."""
         from .fit import fit_poses
 
@@ -375,6 +380,7 @@ class PoseEstimator:
             model=self.model,
             mask=mask,
             config=self._fit_config(iterations, stride),
+            resume=resume,
         )
 
     def _result(self, fit, timings, source, discrepancy=float("nan")) -> PoseResult:
@@ -424,8 +430,9 @@ class PoseEstimator:
     def search(self, depth, mask, *, extra=(), timings=None):
         """Best fit from the template hypotheses (and ``extra`` start poses, always
         refined): all ranked by their depth discrepancy, the best ``hypotheses`` refined
-        briefly by EM (in parallel), the one explaining the depth best refined fully (its
-        EM continued). Returns the fit and its discrepancy."""
+        briefly by EM (in parallel), the ``finals`` explaining the depth best refined
+        fully (their EM continued, in parallel), the best of all kept. Returns the fit and
+        its discrepancy."""
         starts = self.hypotheses(depth, mask)
         if timings is not None:
             timings["templates"] = time.perf_counter()
@@ -440,14 +447,16 @@ class PoseEstimator:
             stride=self.config.candidate_stride,
         )
         scores = self.discrepancies([f.pose for f in fits], depth, mask)
-        k = int(np.argmin(scores))
-        best, best_score = fits[k], float(scores[k])
-        # The winner's EM goes on where its brief fit stopped (same labels, the outlier
-        # distance still annealing) rather than starting over.
-        final = self._fit(depth, mask, best.pose, resume=best)
-        final_score = self.discrepancy(final.pose, depth, mask)
-        if final_score <= best_score:
-            best, best_score = final, final_score
+        order = np.argsort(scores, kind="stable")[: self.config.finals]
+        best, best_score = fits[order[0]], float(scores[order[0]])
+        # The best candidates' EM goes on where their brief fits stopped (same labels,
+        # the outlier distance still annealing) rather than starting over.
+        winners = [fits[i] for i in order]
+        finals = self._fits(depth, mask, [f.pose for f in winners], resume=winners)
+        final_scores = self.discrepancies([f.pose for f in finals], depth, mask)
+        k = int(np.argmin(final_scores))
+        if final_scores[k] <= best_score:
+            best, best_score = finals[k], float(final_scores[k])
         return best, best_score
 
     def estimate(self, depth: np.ndarray, mask: np.ndarray | None = None) -> PoseResult:

@@ -366,21 +366,33 @@ pub fn fit_pose(
 /// [`fit_pose`] from each of `inits` on the same image: the cloud and graph are built
 /// once and the fits run in parallel (each fit's own work is mostly sequential, the
 /// graph cuts above all, so this uses the cores far better than fitting one start
-/// after another). Results in the order of `inits`; identical to separate
-/// [`fit_pose`] calls.
+/// after another). With `resume` (one earlier result per start, see
+/// [`FitProblem::fit_from`]) each fit continues its earlier one. Results in the order
+/// of `inits`; identical to separate [`FitProblem::fit_from`] calls.
+#[allow(clippy::too_many_arguments)]
 pub fn fit_poses(
     depth: &[f32],
     camera: &Camera,
     inits: &[Pose],
+    resume: Option<&[&FitResult]>,
     model: &BodyModel,
     mask: Option<&[bool]>,
     prior: Option<&PosePrior>,
     config: &FitConfig,
 ) -> Result<Vec<FitResult>> {
+    if let Some(r) = resume {
+        if r.len() != inits.len() {
+            return Err(Error::invalid(
+                "resume",
+                format!("has {} results for {} start poses", r.len(), inits.len()),
+            ));
+        }
+    }
     let problem = FitProblem::new(depth, camera, mask, config)?;
     inits
         .par_iter()
-        .map(|init| problem.fit(model, init, prior))
+        .enumerate()
+        .map(|(k, init)| problem.fit_from(model, init, resume.map(|r| r[k]), prior))
         .collect()
 }
 

@@ -261,7 +261,7 @@ fn fit_poses_equals_separate_fits() {
             ..FitConfig::default()
         };
         config.em.max_iterations = 3;
-        let batch = fit_poses(&depth, &cam, &inits, &model, None, None, &config).unwrap();
+        let batch = fit_poses(&depth, &cam, &inits, None, &model, None, None, &config).unwrap();
         assert_eq!(batch.len(), inits.len());
         for (init, b) in inits.iter().zip(&batch) {
             let a = fit_pose(&depth, &cam, init, &model, None, None, &config).unwrap();

@@ -441,10 +441,11 @@ fn fit_pose(
     Ok(args.result(result))
 }
 
-/// `fit_pose` from each row of `init_poses` (K, 22) on the same image, in parallel;
-/// a list of K results, each identical to its own `fit_pose` call.
+/// `fit_pose` from each row of `init_poses` (K, 22) on the same image, in parallel
+/// (with `resume`, K earlier results, each continued); a list of K results, each
+/// identical to its own `fit_pose` call.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, init_poses, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
+#[pyo3(signature = (depth, camera, init_poses, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0, resume=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit_poses(
     py: Python<'_>,
@@ -456,6 +457,7 @@ fn fit_poses(
     config: Option<&PyFitConfig>,
     prior: Option<&Bound<'_, PyAny>>,
     prior_weight: f64,
+    resume: Option<Vec<PyRef<'_, PyFitResult>>>,
 ) -> PyResult<Vec<PyFitResult>> {
     let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
     let a = f64_array(init_poses, "init_poses", Some(2), false)?;
@@ -473,11 +475,15 @@ fn fit_poses(
         .map(|(k, row)| pose_from_slice(row, &format!("init_poses[{k}]")))
         .collect::<crate::Result<Vec<_>>>()?;
     let cam = camera.inner;
+    let resume: Option<Vec<&fit::FitResult>> = resume
+        .as_ref()
+        .map(|r| r.iter().map(|x| &x.result).collect());
     let results = py.detach(|| {
         fit::fit_poses(
             &args.depth,
             &cam,
             &inits,
+            resume.as_deref(),
             &args.model,
             args.mask.as_deref(),
             args.prior.as_ref(),
