@@ -120,6 +120,8 @@ def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
         ("track_stride", 9),
         ("candidate_stride", 0),
         ("candidate_stride", 1.5),
+        ("finals", 0),
+        ("finals", 2.5),
     ],
 )
 def test_nonsense_calibration_settings_are_rejected(field, value):

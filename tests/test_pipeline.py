@@ -251,3 +251,24 @@ def test_tracker_recovers_from_a_swapped_start(side_walk, templates):
     assert pck.min() >= 0.8 and pck.mean() >= 0.9, pck
     with pytest.raises(dp.DepthPoseError, match="pose"):
         tr.start_from(np.full(22, np.nan))
+
+
+def test_more_finals_never_explain_the_depth_worse(side_walk, templates):
+    """The finals are the best candidates by discrepancy, refined; the best of them is
+    kept, so refining more of them can only lower the discrepancy of the result."""
+    from depthpose.pipeline import PipelineConfig
+
+    seq, cam, bg = side_walk
+    for k in (2, 9):
+        depth = seq["depth"][k].astype(np.float32) / 1000
+        scores = []
+        for finals in (1, 2, 3):
+            est = PoseEstimator(
+                cam, templates=templates, background=bg, config=PipelineConfig(finals=finals)
+            )
+            res = est.estimate(depth)
+            assert res.discrepancy == pytest.approx(
+                est.discrepancy(res.pose, depth, est._mask(depth, None))
+            )
+            scores.append(res.discrepancy)
+        assert scores[0] >= scores[1] >= scores[2], scores
