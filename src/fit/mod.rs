@@ -187,16 +187,6 @@ impl FitProblem {
         })
     }
 
-    /// Foreground points (full resolution).
-    pub fn len(&self) -> usize {
-        self.cloud.len()
-    }
-
-    /// Never true: [`FitProblem::new`] refuses fewer than [`MIN_POINTS`] points.
-    pub fn is_empty(&self) -> bool {
-        self.cloud.is_empty()
-    }
-
     /// Fits `model` from `init` with an optional prior toward a pose.
     pub fn fit(
         &self,

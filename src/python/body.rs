@@ -24,6 +24,23 @@ fn pose_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Pose> {
     Ok(pose_from_slice(&a.data, name)?)
 }
 
+/// K poses from a (K, 22) array; a bad row is named `name[k]`.
+pub(super) fn poses_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<Pose>> {
+    let a = f64_array(obj, name, Some(2), false)?;
+    if a.shape[1] != NUM_PARAMS {
+        return Err(Error::invalid(
+            name,
+            format!("expected shape (K, {NUM_PARAMS}), got {:?}", a.shape),
+        )
+        .into());
+    }
+    Ok(a.data
+        .chunks(NUM_PARAMS)
+        .enumerate()
+        .map(|(k, row)| pose_from_slice(row, &format!("{name}[{k}]")))
+        .collect::<crate::Result<Vec<_>>>()?)
+}
+
 fn points_arg(obj: &Bound<PyAny>) -> PyResult<Vec<[f32; 3]>> {
     let a = f32_array(obj, "points", Some(2), true)?;
     if a.shape[1] != 3 {
@@ -307,20 +324,7 @@ impl PyBodyModel {
         let (h, w) = (d.shape[0], d.shape[1]);
         camera.inner.check_image("depth", h, w)?;
         let m = bool_array(mask, "mask", &[h, w])?;
-        let a = f64_array(poses, "poses", Some(2), false)?;
-        if a.shape[1] != NUM_PARAMS {
-            return Err(Error::invalid(
-                "poses",
-                format!("expected shape (K, {NUM_PARAMS}), got {:?}", a.shape),
-            )
-            .into());
-        }
-        let poses = a
-            .data
-            .chunks(NUM_PARAMS)
-            .enumerate()
-            .map(|(k, row)| pose_from_slice(row, &format!("poses[{k}]")))
-            .collect::<crate::Result<Vec<_>>>()?;
+        let poses = poses_arg(poses, "poses")?;
         let cam = camera.inner;
         let out = py.detach(|| {
             self.inner

@@ -1,7 +1,7 @@
 //! Model fitting for Python: `FitConfig`, `FitResult`, `fit_pose`, `pose_from_joints`.
 
 use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
-use super::body::PyBodyModel;
+use super::body::{poses_arg, PyBodyModel};
 use super::camera::PyCamera;
 use crate::body::{
     pose_from_slice, BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS,
@@ -460,20 +460,7 @@ fn fit_poses(
     resume: Option<Vec<PyRef<'_, PyFitResult>>>,
 ) -> PyResult<Vec<PyFitResult>> {
     let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
-    let a = f64_array(init_poses, "init_poses", Some(2), false)?;
-    if a.shape[1] != NUM_PARAMS {
-        return Err(Error::invalid(
-            "init_poses",
-            format!("expected shape (K, {NUM_PARAMS}), got {:?}", a.shape),
-        )
-        .into());
-    }
-    let inits = a
-        .data
-        .chunks(NUM_PARAMS)
-        .enumerate()
-        .map(|(k, row)| pose_from_slice(row, &format!("init_poses[{k}]")))
-        .collect::<crate::Result<Vec<_>>>()?;
+    let inits = poses_arg(init_poses, "init_poses")?;
     let cam = camera.inner;
     let resume: Option<Vec<&fit::FitResult>> = resume
         .as_ref()
