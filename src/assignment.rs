@@ -1,27 +1,38 @@
 //! Exact minimum-cost one-to-one assignment (linear assignment problem).
 //!
 //! Shortest augmenting paths with row/column potentials (the Hungarian method in the
-//! form Jonker and Volgenant build on): rows are added one at a time, each by a
-//! Dijkstra-like search over reduced costs `c[i][j] − u[i] − v[j] ≥ 0`, so the whole
-//! solve is O(n²·m) for n ≤ m rows. Outliers are handled by [`assignment_with_outliers`]:
-//! every item may stay unmatched at a fixed dummy cost.
+//! form of Jonker and Volgenant, organised as Crouse 2016 describes it): rows are added
+//! one at a time, each by a Dijkstra search over reduced costs `c[i][j] − u[i] − v[j]
+//! ≥ 0` that scans only the columns it has not reached yet, breaks ties toward a free
+//! column (which ends the search) and updates the potentials once per row. The whole
+//! solve is O(n²·m) for n ≤ m rows. Outliers are handled by
+//! [`assignment_with_outliers`]: every item may stay unmatched at a fixed dummy cost.
 
 use crate::error::{ensure, Result};
 
 /// Reusable storage for [`solve_assignment_into`] (no allocation once warmed up).
 #[derive(Debug, Clone, Default)]
 pub struct AssignmentWorkspace {
+    /// Row and column potentials.
     u: Vec<f64>,
     v: Vec<f64>,
-    way: Vec<usize>,
+    /// Per column, in the current search: length of the shortest alternating path
+    /// found to it, and the row it was reached from.
+    shortest: Vec<f64>,
+    path: Vec<usize>,
+    /// The current assignment both ways ([`NONE`] where free).
+    row_col: Vec<usize>,
     col_row: Vec<usize>,
-    min_slack: Vec<f64>,
-    used: Vec<bool>,
+    /// Rows and columns the current search has reached.
+    row_seen: Vec<bool>,
+    col_seen: Vec<bool>,
+    /// Columns not reached yet (the first `remaining_len` entries).
+    remaining: Vec<usize>,
     /// Padded square cost matrix of [`assignment_with_outliers`].
     padded: Vec<f64>,
 }
 
-/// Sentinel "no row" in the column → row map.
+/// Sentinel "none" in the row ↔ column maps.
 const NONE: usize = usize::MAX;
 
 /// Minimum-cost assignment of every row of the `rows`×`cols` row-major `cost` matrix
@@ -48,80 +59,92 @@ pub fn solve_assignment_into(
         "all costs must be finite".to_string()
     })?;
     row_to_col.clear();
-    row_to_col.resize(rows, NONE);
     if rows == 0 {
         return Ok(0.0);
     }
-    // Column index 0 is a virtual column holding the row being inserted; real columns
-    // are 1..=cols.
-    ws.u.clear();
-    ws.u.resize(rows + 1, 0.0);
-    ws.v.clear();
-    ws.v.resize(cols + 1, 0.0);
-    ws.way.clear();
-    ws.way.resize(cols + 1, 0);
+    let reset = |v: &mut Vec<f64>, n: usize| {
+        v.clear();
+        v.resize(n, 0.0);
+    };
+    reset(&mut ws.u, rows);
+    reset(&mut ws.v, cols);
+    ws.row_col.clear();
+    ws.row_col.resize(rows, NONE);
     ws.col_row.clear();
-    ws.col_row.resize(cols + 1, NONE);
-    ws.min_slack.resize(cols + 1, 0.0);
-    ws.used.resize(cols + 1, false);
-    for i in 0..rows {
-        ws.col_row[0] = i;
-        let mut j0 = 0usize;
-        ws.min_slack.fill(f64::INFINITY);
-        ws.used.fill(false);
+    ws.col_row.resize(cols, NONE);
+    ws.shortest.resize(cols, 0.0);
+    ws.path.resize(cols, NONE);
+    ws.row_seen.resize(rows, false);
+    ws.col_seen.resize(cols, false);
+    for start in 0..rows {
+        ws.shortest.fill(f64::INFINITY);
+        ws.row_seen.fill(false);
+        ws.col_seen.fill(false);
+        ws.remaining.clear();
+        ws.remaining.extend(0..cols);
+        let mut remaining_len = cols;
+        let mut reached = 0.0f64;
+        let mut i = start;
+        let sink = loop {
+            ws.row_seen[i] = true;
+            let row = &cost[i * cols..(i + 1) * cols];
+            let base = reached - ws.u[i];
+            let mut lowest = f64::INFINITY;
+            let mut pick = 0usize;
+            for (k, &j) in ws.remaining[..remaining_len].iter().enumerate() {
+                let r = base + row[j] - ws.v[j];
+                if r < ws.shortest[j] {
+                    ws.path[j] = i;
+                    ws.shortest[j] = r;
+                }
+                let d = ws.shortest[j];
+                if d < lowest || (d == lowest && ws.col_row[j] == NONE) {
+                    lowest = d;
+                    pick = k;
+                }
+            }
+            // Finite costs: every column is reachable, so `lowest` is finite.
+            reached = lowest;
+            let j = ws.remaining[pick];
+            ws.col_seen[j] = true;
+            remaining_len -= 1;
+            ws.remaining.swap(pick, remaining_len);
+            if ws.col_row[j] == NONE {
+                break j;
+            }
+            i = ws.col_row[j];
+        };
+        // Potentials: the reached rows and columns move by how far inside the search
+        // radius they lie, which keeps every reduced cost ≥ 0 and the new path tight.
+        ws.u[start] += reached;
+        for r in 0..rows {
+            if ws.row_seen[r] && r != start {
+                ws.u[r] += reached - ws.shortest[ws.row_col[r]];
+            }
+        }
+        for c in 0..cols {
+            if ws.col_seen[c] {
+                ws.v[c] -= reached - ws.shortest[c];
+            }
+        }
+        // Flip the alternating path from the free column back to the new row.
+        let mut j = sink;
         loop {
-            ws.used[j0] = true;
-            let i0 = ws.col_row[j0];
-            let row = &cost[i0 * cols..(i0 + 1) * cols];
-            let ui = ws.u[i0];
-            let mut delta = f64::INFINITY;
-            let mut j1 = 0usize;
-            for j in 1..=cols {
-                if ws.used[j] {
-                    continue;
-                }
-                let reduced = row[j - 1] - ui - ws.v[j];
-                if reduced < ws.min_slack[j] {
-                    ws.min_slack[j] = reduced;
-                    ws.way[j] = j0;
-                }
-                if ws.min_slack[j] < delta {
-                    delta = ws.min_slack[j];
-                    j1 = j;
-                }
-            }
-            for j in 0..=cols {
-                if ws.used[j] {
-                    ws.u[ws.col_row[j]] += delta;
-                    ws.v[j] -= delta;
-                } else {
-                    ws.min_slack[j] -= delta;
-                }
-            }
-            j0 = j1;
-            if ws.col_row[j0] == NONE {
+            let r = ws.path[j];
+            ws.col_row[j] = r;
+            let previous = std::mem::replace(&mut ws.row_col[r], j);
+            if r == start {
                 break;
             }
-        }
-        // Augment along the alternating path back to the virtual column.
-        loop {
-            let j1 = ws.way[j0];
-            ws.col_row[j0] = ws.col_row[j1];
-            j0 = j1;
-            if j0 == 0 {
-                break;
-            }
+            j = previous;
         }
     }
-    let mut total = 0.0;
-    for j in 1..=cols {
-        let i = ws.col_row[j];
-        if i != NONE {
-            row_to_col[i] = j - 1;
-            total += cost[i * cols + j - 1];
-        }
-    }
-    Ok(total)
+    row_to_col.extend_from_slice(&ws.row_col);
+    Ok(row_to_col
+        .iter()
+        .enumerate()
+        .map(|(i, &j)| cost[i * cols + j])
+        .sum())
 }
 
 /// Minimum total cost of a one-to-one matching between `rows` and `cols` items where
@@ -236,6 +259,22 @@ mod tests {
         }
 
         #[test]
+        fn square_with_ties_matches_brute_force(n in 1usize..6,
+                                               vals in prop::collection::vec(0u8..3, 36)) {
+            // Few distinct costs: many ties for the search to break.
+            let cost: Vec<f64> = vals[..n * n].iter().map(|&v| v as f64).collect();
+            let mut ws = AssignmentWorkspace::default();
+            let mut a = Vec::new();
+            let total = solve_assignment_into(&cost, n, n, &mut ws, &mut a).unwrap();
+            prop_assert_eq!(total, brute_force(&cost, n, n));
+            let mut seen = vec![false; n];
+            for &j in &a {
+                prop_assert!(!seen[j]);
+                seen[j] = true;
+            }
+        }
+
+        #[test]
         fn outliers_match_brute_force(rows in 0usize..6, cols in 0usize..6,
                                       dummy in 0.0f64..4.0,
                                       vals in prop::collection::vec(0.0f64..10.0, 36)) {
@@ -283,11 +322,12 @@ mod tests {
         let total = solve_assignment_into(&cost, n, n, &mut ws, &mut a).unwrap();
         // Potentials are feasible (reduced costs >= 0) and tight on the assignment.
         let (u, v) = (&ws.u, &ws.v);
-        let dual: f64 = u[..n].iter().sum::<f64>() + v[1..].iter().sum::<f64>();
+        let dual: f64 = u.iter().sum::<f64>() + v.iter().sum::<f64>();
         for i in 0..n {
             for j in 0..n {
-                assert!(cost[i * n + j] - u[i] - v[j + 1] > -1e-9);
+                assert!(cost[i * n + j] - u[i] - v[j] > -1e-9);
             }
+            assert!((cost[i * n + a[i]] - u[i] - v[a[i]]).abs() < 1e-9);
         }
         assert!((dual - total).abs() < 1e-9);
     }
