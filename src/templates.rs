@@ -394,7 +394,7 @@ pub struct TemplateDatabase {
 /// Principal directions kept for the pruning stage's lower bound.
 const PRUNE_DIRECTIONS: usize = 32;
 /// Every this-many-th template sample goes into the principal-direction estimate.
-const PRUNE_SAMPLE_STEP: usize = 8;
+const PRUNE_SAMPLE_STEP: usize = 32;
 
 /// Lower bounds on descriptor distances for the pruning stage.
 ///
@@ -409,6 +409,8 @@ const PRUNE_SAMPLE_STEP: usize = 8;
 struct PruneIndex {
     /// Directions × descriptor values, row-major; rows orthonormal.
     basis: Vec<f64>,
+    /// Values per descriptor.
+    dim: usize,
     directions: usize,
     /// Values per description: the directions' coordinates, then the remainder's length.
     components: usize,
@@ -430,42 +432,33 @@ impl PruneIndex {
             .flat_map(|t| (0..t.context.len()).map(move |j| t.context.descriptor(j)))
             .step_by(PRUNE_SAMPLE_STEP)
             .collect();
-        let n = rows.len().max(1) as f64;
+        let m = rows.len();
         let mut mean = vec![0.0f64; dim];
         for r in &rows {
-            for (m, &v) in mean.iter_mut().zip(r.iter()) {
-                *m += v as f64;
+            for (a, &v) in mean.iter_mut().zip(r.iter()) {
+                *a += v as f64;
             }
         }
-        mean.iter_mut().for_each(|m| *m /= n);
-        let scatter = rows
-            .par_chunks(256)
-            .map(|chunk| {
-                let mut s = vec![0.0f64; dim * dim];
-                let mut c = vec![0.0f64; dim];
-                for r in chunk {
-                    for (ci, (&v, &m)) in c.iter_mut().zip(r.iter().zip(&mean)) {
-                        *ci = v as f64 - m;
-                    }
-                    for a in 0..dim {
-                        let ca = c[a];
-                        for (sab, &cb) in s[a * dim..a * dim + a + 1].iter_mut().zip(&c) {
-                            *sab += ca * cb;
-                        }
-                    }
+        mean.iter_mut().for_each(|a| *a /= m.max(1) as f64);
+        // Lower triangle of the scatter matrix. (A matrix product over a centred copy
+        // was no faster here, and left matching ~8 ms slower per frame afterwards in
+        // the same process, for reasons not pinned down; see docs/templates.md.)
+        let mut scatter = vec![0.0f64; dim * dim];
+        let mut c = vec![0.0f64; dim];
+        for r in &rows {
+            for (ci, (&v, &a)) in c.iter_mut().zip(r.iter().zip(&mean)) {
+                *ci = v as f64 - a;
+            }
+            for a in 0..dim {
+                let ca = c[a];
+                for (sab, &cb) in scatter[a * dim..a * dim + a + 1].iter_mut().zip(&c) {
+                    *sab += ca * cb;
                 }
-                s
-            })
-            .collect::<Vec<_>>()
-            // Summed in order, not by a parallel reduce: the basis must not depend on
-            // how the work was split (a saved and reloaded database equals the original).
-            .into_iter()
-            .fold(vec![0.0f64; dim * dim], |mut a, b| {
-                a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                a
-            });
-        let cov =
-            nalgebra::DMatrix::from_fn(dim, dim, |a, b| scatter[a.max(b) * dim + a.min(b)] / n);
+            }
+        }
+        let cov = nalgebra::DMatrix::from_fn(dim, dim, |a, b| {
+            scatter[a.max(b) * dim + a.min(b)] / m.max(1) as f64
+        });
         let eigen = nalgebra::SymmetricEigen::new(cov);
         let mut order: Vec<usize> = (0..dim).collect();
         order.sort_by(|&a, &b| {
@@ -479,6 +472,7 @@ impl PruneIndex {
         }
         let mut index = PruneIndex {
             basis,
+            dim,
             directions,
             components,
             projected: Vec::new(),
@@ -504,14 +498,26 @@ impl PruneIndex {
     /// Writes the description of one descriptor into `out` (`components` values): its
     /// coordinates along the directions, then the length of the rest of it.
     fn project(&self, descriptor: &[f32], out: &mut [f32]) {
-        let dim = descriptor.len();
-        let mut kept = 0.0f64;
-        for (o, row) in out.iter_mut().zip(self.basis.chunks_exact(dim)) {
-            let c = row
+        // Independent partial sums (a single running f64 sum would stay sequential).
+        fn dot(a: &[f64], b: &[f32]) -> f64 {
+            let mut acc = [0.0f64; 8];
+            let (ca, cb) = (a.chunks_exact(8), b.chunks_exact(8));
+            let tail: f64 = ca
+                .remainder()
                 .iter()
-                .zip(descriptor)
-                .map(|(&b, &d)| b * d as f64)
-                .sum::<f64>();
+                .zip(cb.remainder())
+                .map(|(&x, &y)| x * y as f64)
+                .sum();
+            for (x, y) in ca.zip(cb) {
+                for k in 0..8 {
+                    acc[k] += x[k] * y[k] as f64;
+                }
+            }
+            acc.iter().sum::<f64>() + tail
+        }
+        let mut kept = 0.0f64;
+        for (o, row) in out.iter_mut().zip(self.basis.chunks_exact(self.dim)) {
+            let c = dot(row, descriptor);
             kept += c * c;
             *o = c as f32;
         }
