@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from depthpose import _core
+from depthpose import templates as templates_module
 from depthpose._core import Camera, FileFormatError, InvalidInputError, NoBodyError
 from depthpose.templates import TemplateDatabase, surface_context
 
@@ -172,7 +173,13 @@ def test_default_is_cached(tmp_path, monkeypatch):
     files = list(tmp_path.glob("templates-*.npz"))
     assert len(files) == 1
     b = TemplateDatabase.default(progress=False)
-    assert a.hash == b.hash
+    assert b is a  # loaded once per process
+    # A new process (simulated: the in-process cache cleared) loads the file, no rebuild.
+    mtime = files[0].stat().st_mtime_ns
+    monkeypatch.setattr(templates_module, "_DEFAULT_LOADED", {})
+    c = TemplateDatabase.default(progress=False)
+    assert c is not a and c.hash == a.hash
+    assert files[0].stat().st_mtime_ns == mtime
 
 
 def test_progress_bar(capsys):
