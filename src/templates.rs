@@ -403,8 +403,8 @@ const PRUNE_SAMPLE_STEP: usize = 32;
 /// remainder ‖t − PᵀP·t‖. By Pythagoras and the reverse triangle inequality,
 /// ‖q − t‖² ≥ ‖P·q − P·t‖² + (‖rem q‖ − ‖rem t‖)², which is the squared distance of
 /// the two descriptions: a sample whose bound already exceeds the best cost so far
-/// cannot improve it and is skipped without reading its full descriptor. 24 of the 180
-/// directions hold about 90 % of the templates' descriptor variance.
+/// cannot improve it and is skipped without reading its full descriptor. 32 of the 180
+/// directions hold about 92 % of the templates' descriptor variance.
 #[derive(Debug, Clone, PartialEq, Default)]
 struct PruneIndex {
     /// Directions × descriptor values, row-major; rows orthonormal.
@@ -1114,7 +1114,7 @@ struct Representatives<'a> {
 /// descriptor distance from the short descriptions ([`PruneIndex`]). The pair of least
 /// bound is costed in full first, then only the pairs whose bounds are below the best
 /// cost so far: on the default database about 4 template samples in 100 are read in
-/// full (1 in 6 would be with 24 directions and index order, 85 in 100 by the position
+/// full (about 7 in 100 with 24 directions in index order, 85 in 100 by the position
 /// term alone).
 /// `t_projected` is the template's component-major description; `scratch` is reused
 /// storage.
