@@ -1118,7 +1118,42 @@ struct Representatives<'a> {
 /// term alone).
 /// `t_projected` is the template's component-major description; `scratch` is reused
 /// storage.
+///
+/// On x86-64 CPUs with AVX2 it runs compiled for AVX2 (same results: Rust does not fuse
+/// multiplies and adds on its own).
 fn prune_score(
+    q: &SurfaceContext,
+    reps: &Representatives,
+    t: &SurfaceContext,
+    t_projected: &[f32],
+    lw: f32,
+    scratch: &mut Vec<f32>,
+) -> f32 {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { prune_score_avx2(q, reps, t, t_projected, lw, scratch) };
+    }
+    prune_score_portable(q, reps, t, t_projected, lw, scratch)
+}
+
+/// [`prune_score_portable`] compiled for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn prune_score_avx2(
+    q: &SurfaceContext,
+    reps: &Representatives,
+    t: &SurfaceContext,
+    t_projected: &[f32],
+    lw: f32,
+    scratch: &mut Vec<f32>,
+) -> f32 {
+    prune_score_portable(q, reps, t, t_projected, lw, scratch)
+}
+
+/// The body of [`prune_score`], inlined into each instruction-set variant.
+#[inline(always)]
+fn prune_score_portable(
     q: &SurfaceContext,
     reps: &Representatives,
     t: &SurfaceContext,
@@ -1179,6 +1214,32 @@ fn prune_score(
 const PRUNE_BOUND_MARGIN: f32 = 1.001;
 const PRUNE_BOUND_SLACK: f32 = 1e-8;
 
+/// The `pair_cost` of every query sample (rows) with every template sample (columns),
+/// row-major into `cost`; compiled for AVX2 where the CPU has it (same results).
+fn cost_matrix(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
+    #[inline(always)]
+    fn fill(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
+        cost.clear();
+        cost.reserve(q.len() * t.len());
+        for i in 0..q.len() {
+            for j in 0..t.len() {
+                cost.push(pair_cost(q, i, t, j, lw) as f64);
+            }
+        }
+    }
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn fill_avx2(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
+        fill(q, t, lw, cost)
+    }
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { fill_avx2(q, t, lw, cost) };
+    }
+    fill(q, t, lw, cost)
+}
+
 /// Mean cost per sample of the best one-to-one assignment with outliers.
 pub fn matching_cost(
     q: &SurfaceContext,
@@ -1190,14 +1251,7 @@ pub fn matching_cost(
     assign: &mut Vec<Option<usize>>,
 ) -> f64 {
     let (n, m) = (q.len(), t.len());
-    cost.clear();
-    cost.reserve(n * m);
-    let lw = location_weight as f32;
-    for i in 0..n {
-        for j in 0..m {
-            cost.push(pair_cost(q, i, t, j, lw) as f64);
-        }
-    }
+    cost_matrix(q, t, location_weight as f32, cost);
     let total = assignment_with_outliers(cost, n, m, dummy_cost, ws, assign)
         .expect("cost matrix sized and finite by construction");
     total / n.max(m) as f64
