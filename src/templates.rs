@@ -1107,53 +1107,55 @@ struct Representatives<'a> {
     components: usize,
 }
 
-/// Pruning score: mean over representatives of the cost of their nearest template sample.
-///
-/// Exact, but pruned. Per representative, vectorised passes over all template samples
-/// give each pair a lower bound of its cost: the position term plus the bound of the
-/// descriptor distance from the short descriptions ([`PruneIndex`]). The pair of least
-/// bound is costed in full first, then only the pairs whose bounds are below the best
-/// cost so far: on the default database about 4 template samples in 100 are read in
-/// full (about 7 in 100 with 24 directions in index order, 85 in 100 by the position
-/// term alone).
-/// `t_projected` is the template's component-major description; `scratch` is reused
-/// storage.
-///
-/// On x86-64 CPUs with AVX2 it runs compiled for AVX2 (same results: Rust does not fuse
-/// multiplies and adds on its own).
-fn prune_score(
-    q: &SurfaceContext,
-    reps: &Representatives,
-    t: &SurfaceContext,
-    t_projected: &[f32],
-    lw: f32,
-    scratch: &mut Vec<f32>,
-) -> f32 {
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { prune_score_avx2(q, reps, t, t_projected, lw, scratch) };
-    }
-    prune_score_portable(q, reps, t, t_projected, lw, scratch)
+/// Defines `fn $name(args)` that runs `$body(args)` compiled for AVX2 where the
+/// CPU has it (detected at run time) and the portable build otherwise. `$body` must be
+/// `#[inline(always)]` so that each variant gets its own code. Same results either way:
+/// Rust does not fuse multiplies and adds on its own.
+macro_rules! avx2_dispatch {
+    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? = $body:ident) => {
+        $(#[$meta])*
+        fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
+                $body($($arg),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { avx2($($arg),*) };
+            }
+            $body($($arg),*)
+        }
+    };
 }
 
-/// [`prune_score_portable`] compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-unsafe fn prune_score_avx2(
-    q: &SurfaceContext,
-    reps: &Representatives,
-    t: &SurfaceContext,
-    t_projected: &[f32],
-    lw: f32,
-    scratch: &mut Vec<f32>,
-) -> f32 {
-    prune_score_portable(q, reps, t, t_projected, lw, scratch)
+avx2_dispatch! {
+    /// Pruning score: mean over representatives of the cost of their nearest template
+    /// sample.
+    ///
+    /// Exact, but pruned. Per representative, vectorised passes over all template samples
+    /// give each pair a lower bound of its cost: the position term plus the bound of the
+    /// descriptor distance from the short descriptions ([`PruneIndex`]). The pair of least
+    /// bound is costed in full first, then only the pairs whose bounds are below the best
+    /// cost so far: on the default database about 4 template samples in 100 are read in
+    /// full (about 7 in 100 with 24 directions in index order, 85 in 100 by the position
+    /// term alone).
+    /// `t_projected` is the template's component-major description; `scratch` is reused
+    /// storage.
+    fn prune_score(
+        q: &SurfaceContext,
+        reps: &Representatives,
+        t: &SurfaceContext,
+        t_projected: &[f32],
+        lw: f32,
+        scratch: &mut Vec<f32>,
+    ) -> f32 = prune_score_body
 }
 
 /// The body of [`prune_score`], inlined into each instruction-set variant.
 #[inline(always)]
-fn prune_score_portable(
+fn prune_score_body(
     q: &SurfaceContext,
     reps: &Representatives,
     t: &SurfaceContext,
@@ -1214,30 +1216,23 @@ fn prune_score_portable(
 const PRUNE_BOUND_MARGIN: f32 = 1.001;
 const PRUNE_BOUND_SLACK: f32 = 1e-8;
 
-/// The `pair_cost` of every query sample (rows) with every template sample (columns),
-/// row-major into `cost`; compiled for AVX2 where the CPU has it (same results).
-fn cost_matrix(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
-    #[inline(always)]
-    fn fill(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
-        cost.clear();
-        cost.reserve(q.len() * t.len());
-        for i in 0..q.len() {
-            for j in 0..t.len() {
-                cost.push(pair_cost(q, i, t, j, lw) as f64);
-            }
+avx2_dispatch! {
+    /// The `pair_cost` of every query sample (rows) with every template sample (columns),
+    /// row-major into `cost`.
+    fn cost_matrix(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) =
+        cost_matrix_body
+}
+
+/// The body of [`cost_matrix`], inlined into each instruction-set variant.
+#[inline(always)]
+fn cost_matrix_body(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
+    cost.clear();
+    cost.reserve(q.len() * t.len());
+    for i in 0..q.len() {
+        for j in 0..t.len() {
+            cost.push(pair_cost(q, i, t, j, lw) as f64);
         }
     }
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn fill_avx2(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
-        fill(q, t, lw, cost)
-    }
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { fill_avx2(q, t, lw, cost) };
-    }
-    fill(q, t, lw, cost)
 }
 
 /// Mean cost per sample of the best one-to-one assignment with outliers.
