@@ -120,6 +120,8 @@ def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
         ("track_stride", 9),
         ("candidate_stride", 0),
         ("candidate_stride", 1.5),
+        ("final_stride", 0),
+        ("final_stride", 9),
         ("finals", 0),
         ("finals", 2.5),
     ],
