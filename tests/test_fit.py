@@ -56,6 +56,27 @@ def test_fit_recovers_rendered_pose_within_1cm_mean():
     assert sum(r.part_counts.values()) + r.outliers == int(fg.sum())
 
 
+def test_brief_strided_fit_labels_only_its_own_pixels():
+    """label_all_pixels=False: the same pose as the full labelling, labels only on the
+    sub-sampled pixels (even rows and columns), where they match the rendered parts."""
+    model = BodyModel()
+    truth = natural_pose(model)
+    depth, parts = model.render_depth(truth, CAM)
+    init = perturbed(model, truth, np.random.default_rng(5))
+    full = dp.fit_pose(depth, CAM, init, model=model, config={"stride": 2})
+    brief = dp.fit_pose(
+        depth, CAM, init, model=model, config={"stride": 2, "label_all_pixels": False}
+    )
+    np.testing.assert_array_equal(brief.pose, full.pose)
+    assert "label_all_pixels=False" in repr(dp.FitConfig(label_all_pixels=False))
+    rows, cols = np.nonzero(brief.labels >= 0)
+    assert len(rows) > 100 and np.all(rows % 2 == 0) and np.all(cols % 2 == 0)
+    sub = depth[::2, ::2] > 0
+    assert sum(brief.part_counts.values()) + brief.outliers == int(sub.sum())
+    hit = brief.labels >= 0
+    assert (brief.labels[hit] == parts[hit]).mean() > 0.9
+
+
 def test_fit_on_a_stride_two_grid_labels_every_pixel():
     """EM on every second pixel of every second row, then one full-resolution E-step:
     from eight starts perturbed by up to 20 degrees, at least six reach joints within

@@ -304,6 +304,7 @@ class FitConfig:
     lm_max_iterations: int
     connectivity: int
     stride: int
+    label_all_pixels: bool
     def __init__(
         self,
         *,
@@ -324,6 +325,7 @@ class FitConfig:
         lm_max_iterations: int | None = None,
         connectivity: int = 4,
         stride: int = 1,
+        label_all_pixels: bool = True,
     ) -> None: ...
 
 class FitResult:

@@ -54,21 +54,22 @@ class PipelineConfig:
     #: also gives its left/right-swapped and mirrored-view hypotheses (see
     #: :func:`swap_limbs`, :func:`mirror_view`).
     candidates: int = 5
-    #: Hypotheses (after ranking all by :func:`depth_discrepancy`) refined by EM.
-    hypotheses: int = 4
+    #: Hypotheses (after ranking all by :func:`depth_discrepancy`) refined by EM; 20
+    #: takes all of them (at most 4 per candidate).
+    hypotheses: int = 20
     #: EM iterations for each candidate before choosing.
-    candidate_iterations: int = 3
+    candidate_iterations: int = 2
     #: The best this many candidate fits (by :func:`depth_discrepancy`) are then refined
     #: fully, in parallel, and the best of those kept. More finals is more accurate
     #: (docs/pipeline.md) and, beyond the number of cores, slower.
     finals: int = 3
-    #: Pixel stride (``FitConfig``'s ``stride``) of those brief candidate fits. 2 makes
-    #: ``estimate`` about 25 % faster but picks worse candidates (scratch MPJPE +6 mm,
-    #: docs/pipeline.md), hence 1.
-    candidate_stride: int = 1
+    #: Pixel stride (``FitConfig``'s ``stride``) of those brief candidate fits. At 2 a
+    #: brief fit costs about a seventh of one at 1, so all the hypotheses can be tried
+    #: (docs/pipeline.md, session 9).
+    candidate_stride: int = 2
     #: Pixel stride of the finals' continued EM; the final labels cover every pixel
-    #: either way. 2 (the default since session 9) costs no accuracy on the shared
-    #: sequences and pays for the third final (docs/pipeline.md).
+    #: either way. When it equals ``candidate_stride`` the brief fits skip labelling
+    #: every pixel and the result is always a final.
     final_stride: int = 2
     #: Tracking: weight of the prior toward the predicted pose (see ``fit_pose``).
     prior_weight: float = 100.0
@@ -348,7 +349,7 @@ class PoseEstimator:
             return np.ascontiguousarray(mask, dtype=bool)
         return foreground_mask(depth, self.background)
 
-    def _fit_config(self, iterations=None, stride=None):
+    def _fit_config(self, iterations=None, stride=None, label_all_pixels=None):
         from .fit import FitConfig
 
         kwargs = dict(self.config.fit or {})
@@ -356,6 +357,8 @@ class PoseEstimator:
             kwargs["max_iterations"] = iterations
         if stride is not None:
             kwargs["stride"] = stride
+        if label_all_pixels is not None:
+            kwargs["label_all_pixels"] = label_all_pixels
         return FitConfig(**kwargs)
 
     def _fit(self, depth, mask, init, *, iterations=None, prior=None, stride=None, resume=None):
@@ -373,8 +376,10 @@ class PoseEstimator:
             resume=resume,
         )
 
-    def _fits(self, depth, mask, inits, *, iterations=None, stride=None, resume=None):
-        """:meth:`_fit` from each of ``inits``, in parallel (no prior)."""
+    def _fits(self, depth, mask, inits, *, iterations=None, stride=None, resume=None, brief=False):
+        """:meth:`_fit` from each of ``inits``, in parallel (no prior). ``brief``: the
+        fits are only ranked by pose or continued at the same stride, so a strided fit
+        skips labelling every pixel (``FitConfig.label_all_pixels``)."""
         from .fit import fit_poses
 
         return fit_poses(
@@ -383,7 +388,7 @@ class PoseEstimator:
             np.asarray(inits, np.float64).reshape(-1, 22),
             model=self.model,
             mask=mask,
-            config=self._fit_config(iterations, stride),
+            config=self._fit_config(iterations, stride, False if brief else None),
             resume=resume,
         )
 
@@ -443,12 +448,15 @@ class PoseEstimator:
         order = np.argsort(self.discrepancies(starts, depth, mask), kind="stable")
         ranked = [starts[i] for i in order]
         chosen = [*list(extra), *ranked[: max(1, self.config.hypotheses)]]
+        # Candidates continued at their own stride need no labels beyond their EM's.
+        brief = self.config.candidate_stride == self.config.final_stride
         fits = self._fits(
             depth,
             mask,
             chosen,
             iterations=self.config.candidate_iterations,
             stride=self.config.candidate_stride,
+            brief=brief,
         )
         scores = self.discrepancies([f.pose for f in fits], depth, mask)
         order = np.argsort(scores, kind="stable")[: self.config.finals]
@@ -465,7 +473,8 @@ class PoseEstimator:
         )
         final_scores = self.discrepancies([f.pose for f in finals], depth, mask)
         k = int(np.argmin(final_scores))
-        if final_scores[k] <= best_score:
+        # (A brief candidate's labels cover only its own pixels: a final is kept then.)
+        if brief or final_scores[k] <= best_score:
             best, best_score = finals[k], float(final_scores[k])
         return best, best_score
 

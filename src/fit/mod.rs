@@ -40,6 +40,11 @@ pub struct FitConfig {
     /// 2 = a quarter of the points, about 3× faster), then the full-resolution pixels
     /// are labelled once for the final pose. See [`fit_pose`].
     pub stride: usize,
+    /// With a stride: label every full-resolution pixel for the final pose (true), or
+    /// return the EM's own labels at the sub-sampled pixels only, every other pixel −1,
+    /// with the sub-sampled energy (false: no full-resolution E-step, for brief fits
+    /// whose pose is all that counts, or that are continued at the same stride).
+    pub label_all_pixels: bool,
 }
 
 /// Largest accepted [`FitConfig::stride`].
@@ -51,6 +56,7 @@ impl Default for FitConfig {
             em: EmConfig::default(),
             connectivity: Connectivity::Four,
             stride: 1,
+            label_all_pixels: true,
         }
     }
 }
@@ -288,6 +294,27 @@ impl FitProblem {
             scaled_prior.as_ref(),
             &config.em,
         )?;
+        if !config.label_all_pixels {
+            // The EM's labels where its points are: sub-sampled pixel (r, c) is pixel
+            // (s·r, s·c), the one `resume_labels` reads back.
+            let (w, sw) = (self.camera.width, sub_cam.width);
+            let mut labels = vec![-1i16; w * self.camera.height];
+            for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
+                let (r, c) = (px as usize / sw, px as usize % sw);
+                labels[s * r * w + s * c] = l as i16;
+            }
+            return Ok(FitResult {
+                pose: em.pose,
+                joints: model.joints(&em.pose),
+                labels,
+                energy: em.energy,
+                energy_trace: em.energy_trace,
+                iterations: em.iterations,
+                termination: em.termination,
+                part_counts: em.part_counts,
+                outliers: em.outliers,
+            });
+        }
         // Then every full-resolution pixel: starting from the label of its sub-sampled
         // pixel (the one at the top-left of its s×s block) or, without one (no reading
         // there), the outlier label, one E-step for the final pose at the final outlier

@@ -229,6 +229,72 @@ fn stride_two_recovers_pose_and_labels_every_pixel() {
     assert!(good >= 5, "{good} of 6 starts within 1.5 cm");
 }
 
+/// Without the full-resolution labelling a strided fit has the same pose and EM, its
+/// labels sit on the sub-sampled pixels only (where a continued fit reads them back),
+/// and a fit continued from it at the same stride converges and labels every pixel.
+#[test]
+fn strided_fit_without_full_labels_keeps_its_em() {
+    let model = BodyModel::default();
+    let cam = Camera::itop();
+    let truth = natural_pose();
+    let (depth, _) = model.render_depth(&truth, &cam);
+    let w = cam.width;
+    let all = FitConfig {
+        stride: 2,
+        em: EmConfig {
+            max_iterations: 2,
+            ..EmConfig::default()
+        },
+        ..FitConfig::default()
+    };
+    let brief = FitConfig {
+        label_all_pixels: false,
+        ..all
+    };
+    let init = perturbed(&truth, 3, 20f64.to_radians(), 0.1);
+    let a = FitProblem::new(&depth, &cam, None, &all)
+        .unwrap()
+        .fit(&model, &init, None)
+        .unwrap();
+    let problem = FitProblem::new(&depth, &cam, None, &brief).unwrap();
+    let b = problem.fit(&model, &init, None).unwrap();
+    assert_eq!(a.pose, b.pose);
+    assert_eq!(a.energy_trace, b.energy_trace);
+    assert_eq!(a.iterations, b.iterations);
+    let n_sub = (0..depth.len())
+        .filter(|&px| depth[px] > 0.0 && (px / w).is_multiple_of(2) && (px % w).is_multiple_of(2))
+        .count();
+    assert_eq!(b.part_counts.iter().sum::<usize>() + b.outliers, n_sub);
+    for (px, &l) in b.labels.iter().enumerate() {
+        if l >= 0 {
+            assert!(
+                (px / w).is_multiple_of(2) && (px % w).is_multiple_of(2),
+                "label at odd pixel {px}"
+            );
+        }
+    }
+    assert_eq!(
+        b.labels.iter().filter(|&&l| l >= 0).count(),
+        n_sub - b.outliers
+    );
+    // Continued at stride 2 (labelling every pixel at the end), from either result.
+    let more = FitConfig {
+        em: EmConfig {
+            max_iterations: 6,
+            ..all.em
+        },
+        ..all
+    };
+    let cont = FitProblem::new(&depth, &cam, None, &more).unwrap();
+    let from_b = cont.fit_from(&model, &b.pose, Some(&b), None).unwrap();
+    assert!(from_b.energy_trace.windows(2).all(|w| w[1] <= w[0]));
+    assert!(joint_errors(&model, &from_b.pose, &truth).0 < 0.015);
+    assert_eq!(
+        from_b.labels.iter().filter(|&&l| l >= 0).count() + from_b.outliers,
+        depth.iter().filter(|z| **z > 0.0).count()
+    );
+}
+
 #[test]
 fn stride_out_of_range_is_an_error() {
     let model = BodyModel::default();

@@ -36,6 +36,7 @@ pub struct PyFitConfig {
     lm_max_iterations: usize,
     connectivity: u32,
     stride: usize,
+    label_all_pixels: bool,
 }
 
 impl PyFitConfig {
@@ -87,6 +88,7 @@ impl PyFitConfig {
             em,
             connectivity: Connectivity::from_int(self.connectivity)?,
             stride: self.stride,
+            label_all_pixels: self.label_all_pixels,
         };
         cfg.validate()?;
         Ok(cfg)
@@ -104,7 +106,8 @@ impl PyFitConfig {
         contrast_weight=None, contrast_sigma=None, outlier_distance=None,
         outlier_distance_start=None, anneal_iterations=None, truncation_factor=None,
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
-        expansion_cycles=None, lm_max_iterations=None, connectivity=4, stride=1))]
+        expansion_cycles=None, lm_max_iterations=None, connectivity=4, stride=1,
+        label_all_pixels=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma: Option<f64>,
@@ -124,6 +127,7 @@ impl PyFitConfig {
         lm_max_iterations: Option<i64>,
         connectivity: i64,
         stride: i64,
+        label_all_pixels: bool,
     ) -> PyResult<Self> {
         let d = EmConfig::default();
         let count = |v: Option<i64>, default: usize, name: &str| -> PyResult<usize> {
@@ -151,6 +155,7 @@ impl PyFitConfig {
             lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
             connectivity: u32::try_from(connectivity).unwrap_or(0),
             stride: usize::try_from(stride).unwrap_or(0),
+            label_all_pixels,
         };
         cfg.to_rust()?;
         Ok(cfg)
@@ -158,9 +163,9 @@ impl PyFitConfig {
 
     fn __repr__(&self) -> String {
         format!(
-            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={})",
+            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={}, label_all_pixels={})",
             self.sigma, self.loss, self.potts, self.contrast_weight, self.outlier_distance,
-            self.max_iterations, self.stride
+            self.max_iterations, self.stride, if self.label_all_pixels { "True" } else { "False" }
         )
     }
 }
