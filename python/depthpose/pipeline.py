@@ -73,8 +73,9 @@ class PipelineConfig:
     final_stride: int = 2
     #: Tracking: weight of the prior toward the predicted pose (see ``fit_pose``).
     prior_weight: float = 100.0
-    #: Tracking: EM iterations per tracked frame (on the ``track_stride`` grid).
-    track_iterations: int = 6
+    #: Tracking: EM iterations per tracked frame (on the ``track_stride`` grid); 4
+    #: since session 9, when 4, 5 and 6 tracked equally well (docs/pipeline.md).
+    track_iterations: int = 4
     #: Tracking: EM of a tracked frame runs on every ``track_stride``-th pixel of every
     #: ``track_stride``-th row, then labels the full resolution once (``FitConfig``'s
     #: ``stride``; 1 = every pixel). See docs/pipeline.md for speed and accuracy.
