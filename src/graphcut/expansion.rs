@@ -501,8 +501,15 @@ pub struct CrfSolver<C: Cost> {
     /// `expansion_move`).
     incident_weight: Vec<Option<C>>,
     /// Per node, in the current expansion move: may switch to α (not labelled α, not
-    /// pruned). Only free nodes are in the cut.
+    /// pruned). Only free nodes are in the cut. All false between moves.
     is_free: Vec<bool>,
+    /// Per label α, during one `alpha_expansion` call: every node that could be free in
+    /// α's move (a superset: each node that passed the pruning test for α at the start
+    /// of the call or when it last switched label; duplicates allowed), so that a move
+    /// visits these instead of every node. `sorted[α]`: the list is ascending and
+    /// without duplicates.
+    candidates: Vec<Vec<u32>>,
+    sorted: Vec<bool>,
     /// The free nodes of the current move, ascending; then those that switched.
     free: Vec<u32>,
     /// Node → incident edges (CSR, ascending edge index, self-loops left out).
@@ -568,6 +575,8 @@ impl<C: Cost> CrfSolver<C> {
             e1: vec![C::ZERO; n_nodes],
             incident_weight: vec![None; n_nodes],
             is_free: vec![false; n_nodes],
+            candidates: Vec::new(),
+            sorted: Vec::new(),
             free: Vec::new(),
             adj_start,
             adj,
@@ -613,6 +622,7 @@ impl<C: Cost> CrfSolver<C> {
         let c = self.check(problem, true)?;
         let mut labels = c.check_init(init)?;
         self.prepare_expansion(&c);
+        self.collect_candidates(&c, &labels);
         let mut e = c.energy(&labels);
         let mut trace = vec![e.value()];
         // `version` counts accepted moves; a label whose move failed at the current
@@ -631,6 +641,7 @@ impl<C: Cost> CrfSolver<C> {
                 let new_e = self.expansion_move(&c, &labels, alpha as i32, &e);
                 if new_e.lt(&e) {
                     std::mem::swap(&mut labels, &mut self.candidate);
+                    self.add_switched_candidates(&c, alpha);
                     e = new_e;
                     trace.push(e.value());
                     version += 1;
@@ -669,6 +680,50 @@ impl<C: Cost> CrfSolver<C> {
         }
     }
 
+    /// Whether node `i`, labelled `fi` (≠ α), must be in the cut of α's move: the exact
+    /// pruning test of [`Self::expansion_move`] does not fix it.
+    #[inline(always)]
+    fn may_switch(&self, c: &Checked<C>, i: usize, fi: usize, a: usize) -> bool {
+        if !self.prune {
+            return true;
+        }
+        match self.incident_weight[i].and_then(|w| w.mul(c.v[fi * c.l + a])) {
+            Some(slack) => c.u_graph(i, a) - c.u_graph(i, fi) <= slack,
+            None => true, // overflow: no pruning for this node
+        }
+    }
+
+    /// The per-label candidate lists of one `alpha_expansion` call: one pass over the
+    /// nodes' unary rows instead of one per move.
+    fn collect_candidates(&mut self, c: &Checked<C>, labels: &[i32]) {
+        self.candidates.resize_with(c.l, Vec::new);
+        self.candidates.iter_mut().for_each(Vec::clear);
+        self.sorted.clear();
+        self.sorted.resize(c.l, true);
+        for (i, &fi) in labels.iter().enumerate() {
+            let fi = fi as usize;
+            for a in 0..c.l {
+                if a != fi && self.may_switch(c, i, fi, a) {
+                    self.candidates[a].push(i as u32);
+                }
+            }
+        }
+    }
+
+    /// After an accepted move of `alpha`: the nodes that switched (`self.free`) join
+    /// the lists of the labels they may now switch to.
+    fn add_switched_candidates(&mut self, c: &Checked<C>, alpha: usize) {
+        for k in 0..self.free.len() {
+            let i = self.free[k] as usize;
+            for a in 0..c.l {
+                if a != alpha && self.may_switch(c, i, alpha, a) {
+                    self.candidates[a].push(i as u32);
+                    self.sorted[a] = false;
+                }
+            }
+        }
+    }
+
     /// Builds and solves the expansion move of `alpha` from `labels`, whose energy is
     /// `e`; leaves the moved labelling in `self.candidate` and returns its energy.
     ///
@@ -702,25 +757,22 @@ impl<C: Cost> CrfSolver<C> {
         // f_i in every optimal move and can be left out of the cut. On the EM's body
         // parts this removes most nodes from most moves (points far from segment α).
         // The nodes left, not labelled α, are the free ones.
+        // Only α's candidates can pass (see `candidates`); visited in ascending order, so
+        // the move is the one a scan over every node would build.
+        if !self.sorted[a] {
+            self.candidates[a].sort_unstable();
+            self.candidates[a].dedup();
+            self.sorted[a] = true;
+        }
         self.free.clear();
-        for i in 0..c.n {
+        for &iu in &self.candidates[a] {
+            let i = iu as usize;
             let fi = labels[i];
-            if fi == alpha {
-                self.is_free[i] = false;
-                continue;
-            }
-            let cur = c.u_graph(i, fi as usize);
-            let switch = c.u_graph(i, a);
-            self.e0[i] = cur;
-            self.e1[i] = switch;
-            let fixed = self.prune
-                && match self.incident_weight[i].and_then(|w| w.mul(c.v[fi as usize * c.l + a])) {
-                    Some(slack) => switch - cur > slack,
-                    None => false, // overflow: no pruning for this node
-                };
-            self.is_free[i] = !fixed;
-            if !fixed {
-                self.free.push(i as u32);
+            if fi != alpha && self.may_switch(c, i, fi as usize, a) {
+                self.e0[i] = c.u_graph(i, fi as usize);
+                self.e1[i] = c.u_graph(i, a);
+                self.is_free[i] = true;
+                self.free.push(iu);
             }
         }
         // Edge terms, x = 1 meaning "switch to α", fixed nodes at x = 0 and α nodes at
@@ -784,6 +836,9 @@ impl<C: Cost> CrfSolver<C> {
         self.graph.maxflow();
         // The switched nodes: free and on the sink side.
         self.candidate.copy_from_slice(labels);
+        for &i in &self.free {
+            self.is_free[i as usize] = false;
+        }
         let graph = &self.graph;
         self.free.retain(|&i| graph.is_sink_side(i as usize));
         for &i in &self.free {
@@ -1279,12 +1334,96 @@ mod tests {
                 let best = best_move(&v, &labels, alpha);
                 for prune in [true, false] {
                     s.set_pruning(prune);
+                    s.collect_candidates(&c, &labels);
                     let e = s.expansion_move(&c, &labels, alpha, &e0);
                     prop_assert_eq!(e.value(), best, "prune {}", prune);
                     // The energy by differences equals the moved labelling's own.
                     prop_assert_eq!(e, c.energy(&s.candidate));
                 }
             }
+        }
+    }
+
+    /// Reference for the candidate lists: the same expansion loop with the lists
+    /// rebuilt from every node before each move (what a scan over all nodes visits).
+    fn expansion_rebuilding_candidates(
+        p: &CrfProblem<i64>,
+        init: &[i32],
+        cycles: usize,
+    ) -> Vec<i32> {
+        let c = check_problem(p, true).unwrap();
+        let mut s = CrfSolver::new(c.n, p.edges).unwrap();
+        s.prepare_expansion(&c);
+        let mut labels = init.to_vec();
+        let mut e = c.energy(&labels);
+        let mut version = 0usize;
+        let mut failed_at = vec![usize::MAX; c.l];
+        for _ in 0..cycles {
+            let mut improved = false;
+            for alpha in 0..c.l {
+                if !c.allowed_somewhere[alpha] || failed_at[alpha] == version {
+                    continue;
+                }
+                s.collect_candidates(&c, &labels);
+                let new_e = s.expansion_move(&c, &labels, alpha as i32, &e);
+                if new_e.lt(&e) {
+                    labels.copy_from_slice(&s.candidate);
+                    e = new_e;
+                    version += 1;
+                    improved = true;
+                } else {
+                    failed_at[alpha] = version;
+                }
+            }
+            if !improved {
+                break;
+            }
+        }
+        labels
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        /// The per-label candidate lists, kept up to date as nodes switch, give exactly
+        /// the labelling of lists rebuilt before every move: no node that may switch is
+        /// ever missed. Grids with spread unaries, so that pruning and switching both
+        /// happen many times.
+        #[test]
+        fn candidate_lists_match_rebuilt_lists(
+            w in 2usize..7,
+            h in 2usize..7,
+            l in 2usize..6,
+            unary_seed in prop::collection::vec(0i64..40, 36 * 6),
+            weight_seed in prop::collection::vec(0i64..12, 2 * 36),
+            metric in any::<bool>(),
+        ) {
+            let n = w * h;
+            let mut edges = Vec::new();
+            for r in 0..h {
+                for c in 0..w {
+                    let i = (r * w + c) as u32;
+                    if c + 1 < w {
+                        edges.push([i, i + 1]);
+                    }
+                    if r + 1 < h {
+                        edges.push([i, i + w as u32]);
+                    }
+                }
+            }
+            let p = Prob {
+                l,
+                unary: unary_seed[..n * l].to_vec(),
+                weights: weight_seed[..edges.len()].to_vec(),
+                edges,
+            };
+            let tl = truncated_linear(l);
+            let v = p.view(if metric { Some(&tl) } else { None });
+            let init: Vec<i32> = (0..n).map(|i| ((i * 5 + 1) % l) as i32).collect();
+            let mut s = CrfSolver::new(n, &p.edges).unwrap();
+            let cfg = MoveConfig { max_cycles: 5 };
+            let got = s.alpha_expansion(&v, Some(&init), &cfg).unwrap();
+            prop_assert_eq!(got.labels, expansion_rebuilding_candidates(&v, &init, 5));
         }
     }
 
