@@ -1346,6 +1346,7 @@ mod tests {
 
     /// Reference for the candidate lists: the same expansion loop with the lists
     /// rebuilt from every node before each move (what a scan over all nodes visits).
+    #[allow(clippy::needless_range_loop)] // written as `alpha_expansion` is
     fn expansion_rebuilding_candidates(
         p: &CrfProblem<i64>,
         init: &[i32],
