@@ -605,10 +605,14 @@ class PoseTracker:
         self.reset()
         self._prev = pose.copy()
 
+    def _explains_enough(self, labels, mask) -> bool:
+        """At least ``min_inlier_share`` of the foreground is labelled as body."""
+        n = int(np.asarray(mask).sum())
+        inliers = int((np.asarray(labels) >= 0).sum())
+        return n > 0 and inliers >= self.config.min_inlier_share * n
+
     def _lost(self, fit, mask: np.ndarray, score: float) -> bool:
-        n = int(mask.sum())
-        inliers = int((np.asarray(fit.labels) >= 0).sum())
-        if n == 0 or inliers / n < self.config.min_inlier_share:
+        if not self._explains_enough(fit.labels, mask):
             return True
         if score > self.config.lost_discrepancy:
             return True
@@ -727,10 +731,8 @@ class PoseTracker:
         self._prev = res.pose.copy()
         if np.isfinite(res.discrepancy):
             self._recent = [*self._recent[-14:], res.discrepancy]
-        if self.calibrating and not first:
-            n = int(np.asarray(mask).sum())
-            if int((res.labels >= 0).sum()) >= cfg.min_inlier_share * max(n, 1):
-                self._collect(np.asarray(depth), np.asarray(mask, bool), res)
+        if self.calibrating and not first and self._explains_enough(res.labels, mask):
+            self._collect(np.asarray(depth), np.asarray(mask, bool), res)
         return res
 
 
