@@ -236,8 +236,13 @@ def test_bad_input_names_the_argument():
         dp.fit_pose(depth, CAM, truth[:21])
     bad = truth.copy()
     bad[9] = np.nan
-    with pytest.raises(dp.InvalidInputError, match="init_pose"):
+    name = model.param_names[9]
+    with pytest.raises(dp.InvalidInputError, match=f"init_pose: {name} is not finite"):
         dp.fit_pose(depth, CAM, bad)
+    with pytest.raises(dp.InvalidInputError, match=f"prior: {name} is not finite"):
+        dp.fit_pose(depth, CAM, truth, prior=bad)
+    with pytest.raises(dp.InvalidInputError, match=f"init: {name} is not finite"):
+        dp.pose_from_joints(model.joints(truth), init=bad)
     with pytest.raises(dp.InvalidInputError, match="depth"):
         dp.fit_pose(depth[:, :100], CAM, truth)
     with pytest.raises(dp.NoBodyError):

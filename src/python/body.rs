@@ -19,8 +19,9 @@ type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
 type I16Array<'py> = Bound<'py, PyArrayDyn<i16>>;
 type I64Array<'py> = Bound<'py, PyArrayDyn<i64>>;
 
-fn pose_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Pose> {
-    let a = f64_array(obj, name, Some(1), true)?;
+/// One pose from a (22,) array; a non-finite value is named by its parameter.
+pub(super) fn pose_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Pose> {
+    let a = f64_array(obj, name, Some(1), false)?;
     Ok(pose_from_slice(&a.data, name)?)
 }
 

@@ -1,7 +1,7 @@
 //! Model fitting for Python: `FitConfig`, `FitResult`, `fit_pose`, `pose_from_joints`.
 
 use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
-use super::body::{poses_arg, PyBodyModel};
+use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::camera::PyCamera;
 use crate::body::{
     pose_from_slice, BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS,
@@ -376,7 +376,7 @@ impl FitArgs {
         };
         let prior = match prior {
             Some(p) => {
-                let a = f64_array(p, "prior", Some(1), true)?;
+                let prior = pose_arg(p, "prior")?;
                 if !(prior_weight.is_finite() && prior_weight >= 0.0) {
                     return Err(Error::invalid(
                         "prior_weight",
@@ -384,11 +384,7 @@ impl FitArgs {
                     )
                     .into());
                 }
-                Some(PosePrior::uniform(
-                    pose_from_slice(&a.data, "prior")?,
-                    prior_weight,
-                    prior_weight,
-                ))
+                Some(PosePrior::uniform(prior, prior_weight, prior_weight))
             }
             None => None,
         };
@@ -431,8 +427,7 @@ fn fit_pose(
     resume: Option<PyRef<'_, PyFitResult>>,
 ) -> PyResult<PyFitResult> {
     let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
-    let init = f64_array(init_pose, "init_pose", Some(1), false)?;
-    let init = pose_from_slice(&init.data, "init_pose")?;
+    let init = pose_arg(init_pose, "init_pose")?;
     let cam = camera.inner;
     let resume = resume.as_ref().map(|r| &r.result);
     let result = py.detach(|| {
@@ -505,12 +500,7 @@ fn pose_from_joints<'py>(
     if let Some(i) = a.data.iter().position(|v| v.is_infinite()) {
         return Err(Error::invalid("joints", format!("infinite value at flat index {i}")).into());
     }
-    let init = init
-        .map(|p| -> PyResult<_> {
-            let a = f64_array(p, "init", Some(1), true)?;
-            Ok(pose_from_slice(&a.data, "init")?)
-        })
-        .transpose()?;
+    let init = init.map(|p| pose_arg(p, "init")).transpose()?;
     let j: [Vector3<f64>; NUM_JOINTS] =
         std::array::from_fn(|k| Vector3::new(a.data[3 * k], a.data[3 * k + 1], a.data[3 * k + 2]));
     let model = model.map_or_else(BodyModel::default, |m| m.inner.clone());
