@@ -86,7 +86,7 @@ fn subsample(
 ) -> (Vec<f32>, Option<Vec<bool>>, Camera) {
     let (w, h) = (camera.width, camera.height);
     let (sw, sh) = (w.div_ceil(s), h.div_ceil(s));
-    let pick = |r: usize, c: usize| (s * r) * w + s * c;
+    let pick = |r: usize, c: usize| full_resolution_pixel(r * sw + c, sw, s, w);
     let sub_depth = (0..sh)
         .flat_map(|r| (0..sw).map(move |c| depth[pick(r, c)]))
         .collect();
@@ -105,6 +105,14 @@ fn subsample(
         height: sh,
     };
     (sub_depth, sub_mask, cam)
+}
+
+/// The index in the W-wide full-resolution image of pixel `px` of the `sub_width`-wide
+/// image [`subsample`] made with stride `s`: (r, c) ↦ (s·r, s·c).
+#[inline]
+fn full_resolution_pixel(px: usize, sub_width: usize, s: usize, w: usize) -> usize {
+    let (r, c) = (px / sub_width, px % sub_width);
+    s * r * w + s * c
 }
 
 /// The H×W image of per-point labels (−1 where no point).
@@ -235,10 +243,7 @@ impl FitProblem {
                 sub_cloud
                     .pixels
                     .iter()
-                    .map(|&px| {
-                        let (r, c) = (px as usize / sw, px as usize % sw);
-                        label(s * r * w + s * c)
-                    })
+                    .map(|&px| label(full_resolution_pixel(px as usize, sw, s, w)))
                     .collect()
             }
         })
@@ -300,8 +305,7 @@ impl FitProblem {
             let (w, sw) = (self.camera.width, sub_cam.width);
             let mut labels = vec![-1i16; w * self.camera.height];
             for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
-                let (r, c) = (px as usize / sw, px as usize % sw);
-                labels[s * r * w + s * c] = l as i16;
+                labels[full_resolution_pixel(px as usize, sw, s, w)] = l as i16;
             }
             return Ok(FitResult {
                 pose: em.pose,
