@@ -53,7 +53,7 @@ class PipelineConfig:
     #: Template candidates taken from the search when estimating from scratch; each
     #: also gives its left/right-swapped and mirrored-view hypotheses (see
     #: :func:`swap_limbs`, :func:`mirror_view`).
-    candidates: int = 5
+    candidates: int = 4
     #: Hypotheses (after ranking all by :func:`depth_discrepancy`) refined by EM; 20
     #: takes all of them (at most 4 per candidate).
     hypotheses: int = 20
