@@ -95,6 +95,10 @@ class PipelineConfig:
     #: swapped and mirrored hypotheses of the tracked pose) and the track switches when
     #: a hypothesis explains the depth clearly better (0 = never).
     recheck_every: int = 8
+    #: ... with this many template hypotheses besides the tracked pose and its
+    #: swapped-limbs pose (a lost track searches with ``hypotheses``). On the shared
+    #: sequences 2, 6 and all gave the same accuracy (docs/pipeline.md, session 9).
+    recheck_hypotheses: int = 4
     #: ... "clearly better": lower discrepancy by at least this share.
     switch_margin: float = 0.1
     #: Fitting settings passed to ``fit_pose`` as ``FitConfig`` keywords (None = defaults).
@@ -140,6 +144,7 @@ class PipelineConfig:
             if getattr(self, name) > 8:
                 raise InvalidInputError(f"{name}: expected 1..8, got {getattr(self, name)!r}")
         count("recheck_every", 0)
+        count("recheck_hypotheses", 1)
         count("calibration_frames", 0)
         count("calibration_every", 1)
         count("calibration_rounds", 1)
@@ -437,9 +442,10 @@ class PoseEstimator:
                 out.append(q)
         return out
 
-    def search(self, depth, mask, *, extra=(), timings=None):
+    def search(self, depth, mask, *, extra=(), timings=None, hypotheses=None):
         """Best fit from the template hypotheses (and ``extra`` start poses, always
-        refined): all ranked by their depth discrepancy, the best ``hypotheses`` refined
+        refined): all ranked by their depth discrepancy, the best ``hypotheses`` (default
+        ``config.hypotheses``) refined
         briefly by EM (in parallel), the ``finals`` explaining the depth best refined
         fully (their EM continued, in parallel), the best of all kept. Returns the fit and
         its discrepancy."""
@@ -448,7 +454,8 @@ class PoseEstimator:
             timings["templates"] = time.perf_counter()
         order = np.argsort(self.discrepancies(starts, depth, mask), kind="stable")
         ranked = [starts[i] for i in order]
-        chosen = [*list(extra), *ranked[: max(1, self.config.hypotheses)]]
+        n = self.config.hypotheses if hypotheses is None else hypotheses
+        chosen = [*list(extra), *ranked[: max(1, n)]]
         # Candidates continued at their own stride need no labels beyond their EM's.
         brief = self.config.candidate_stride == self.config.final_stride
         fits = self._fits(
@@ -706,7 +713,12 @@ class PoseTracker:
                 self._since_check = 0
                 t2 = {"start": time.perf_counter()}
                 pose = np.asarray(fit.pose)
-                best, best_score = est.search(depth, m, extra=[pose, swap_limbs(pose)])
+                best, best_score = est.search(
+                    depth,
+                    m,
+                    extra=[pose, swap_limbs(pose)],
+                    hypotheses=None if lost else cfg.recheck_hypotheses,
+                )
                 t2["search"] = time.perf_counter()
                 margin = 0.0 if lost else cfg.switch_margin
                 if best_score < score * (1.0 - margin):

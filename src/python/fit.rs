@@ -4,8 +4,8 @@ use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
 use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::camera::PyCamera;
 use crate::body::{
-    pose_from_slice, BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS,
-    PART_NAMES, SHAPE_FACTOR_NAMES,
+    BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS, PART_NAMES,
+    SHAPE_FACTOR_NAMES,
 };
 use crate::cloud::Connectivity;
 use crate::error::Error;
