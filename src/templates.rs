@@ -1107,25 +1107,27 @@ struct Representatives<'a> {
     components: usize,
 }
 
-/// Defines `fn $name(args)` that runs `$body(args)` compiled for AVX2 where the
-/// CPU has it (detected at run time) and the portable build otherwise. `$body` must be
-/// `#[inline(always)]` so that each variant gets its own code. Same results either way:
-/// Rust does not fuse multiplies and adds on its own.
+/// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
+/// has it (detected at run time), and the portable build otherwise. The body is an
+/// `#[inline(always)]` inner function, so each variant gets its own code. Same results
+/// either way: Rust does not fuse multiplies and adds on its own.
 macro_rules! avx2_dispatch {
-    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? = $body:ident) => {
+    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
         $(#[$meta])*
         fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[inline(always)]
+            fn body($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
             #[target_feature(enable = "avx2")]
             unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
-                $body($($arg),*)
+                body($($arg),*)
             }
             #[cfg(target_arch = "x86_64")]
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU supports AVX2 (checked just above).
                 return unsafe { avx2($($arg),*) };
             }
-            $body($($arg),*)
+            body($($arg),*)
         }
     };
 }
@@ -1150,64 +1152,53 @@ avx2_dispatch! {
         t_projected: &[f32],
         lw: f32,
         scratch: &mut Vec<f32>,
-    ) -> f32 = prune_score_body
-}
-
-/// The body of [`prune_score`], inlined into each instruction-set variant.
-#[inline(always)]
-fn prune_score_body(
-    q: &SurfaceContext,
-    reps: &Representatives,
-    t: &SurfaceContext,
-    t_projected: &[f32],
-    lw: f32,
-    scratch: &mut Vec<f32>,
-) -> f32 {
-    let (k, n) = (reps.components, t.len());
-    scratch.clear();
-    scratch.resize(2 * n, 0.0);
-    let (lower, location) = scratch.split_at_mut(n);
-    let mut total = 0.0;
-    for (r, &i) in reps.samples.iter().enumerate() {
-        let pi = q.positions[i];
-        for (l, pj) in location.iter_mut().zip(&t.positions) {
-            *l = (pi[0] - pj[0]) * (pi[0] - pj[0]) + (pi[1] - pj[1]) * (pi[1] - pj[1]);
-        }
-        // lw·√(squared distance): the same arithmetic as `pair_cost`.
-        location.iter_mut().for_each(|l| *l = lw * l.sqrt());
-        lower.fill(0.0);
-        for (c, &qc) in reps.projected[r * k..(r + 1) * k].iter().enumerate() {
-            for (lo, &v) in lower.iter_mut().zip(&t_projected[c * n..(c + 1) * n]) {
-                *lo += (qc - v) * (qc - v);
+    ) -> f32 {
+        let (k, n) = (reps.components, t.len());
+        scratch.clear();
+        scratch.resize(2 * n, 0.0);
+        let (lower, location) = scratch.split_at_mut(n);
+        let mut total = 0.0;
+        for (r, &i) in reps.samples.iter().enumerate() {
+            let pi = q.positions[i];
+            for (l, pj) in location.iter_mut().zip(&t.positions) {
+                *l = (pi[0] - pj[0]) * (pi[0] - pj[0]) + (pi[1] - pj[1]) * (pi[1] - pj[1]);
             }
-        }
-        // Lower bounds of the pair costs. They come from rounded descriptions: the
-        // margin lies well above that rounding, so no bound exceeds its pair's cost.
-        for (lo, &l) in lower.iter_mut().zip(location.iter()) {
-            *lo = l + ((*lo - PRUNE_BOUND_SLACK).max(0.0) / PRUNE_BOUND_MARGIN).sqrt();
-        }
-        // The pair of least bound first (usually the best or close to it), then every
-        // pair whose bound is below the best cost so far (any other costs at least its
-        // bound, so cannot improve it).
-        let qd = q.descriptor(i);
-        let mut first = 0;
-        for (j, &b) in lower.iter().enumerate() {
-            if b < lower[first] {
-                first = j;
+            // lw·√(squared distance): the same arithmetic as `pair_cost`.
+            location.iter_mut().for_each(|l| *l = lw * l.sqrt());
+            lower.fill(0.0);
+            for (c, &qc) in reps.projected[r * k..(r + 1) * k].iter().enumerate() {
+                for (lo, &v) in lower.iter_mut().zip(&t_projected[c * n..(c + 1) * n]) {
+                    *lo += (qc - v) * (qc - v);
+                }
             }
-        }
-        let cost = |j: usize| {
-            crate::descriptor::squared_distance(qd, t.descriptor(j)).sqrt() + location[j]
-        };
-        let mut best = cost(first);
-        for (j, &b) in lower.iter().enumerate() {
-            if b < best && j != first {
-                best = best.min(cost(j));
+            // Lower bounds of the pair costs. They come from rounded descriptions: the
+            // margin lies well above that rounding, so no bound exceeds its pair's cost.
+            for (lo, &l) in lower.iter_mut().zip(location.iter()) {
+                *lo = l + ((*lo - PRUNE_BOUND_SLACK).max(0.0) / PRUNE_BOUND_MARGIN).sqrt();
             }
+            // The pair of least bound first (usually the best or close to it), then every
+            // pair whose bound is below the best cost so far (any other costs at least its
+            // bound, so cannot improve it).
+            let qd = q.descriptor(i);
+            let mut first = 0;
+            for (j, &b) in lower.iter().enumerate() {
+                if b < lower[first] {
+                    first = j;
+                }
+            }
+            let cost = |j: usize| {
+                crate::descriptor::squared_distance(qd, t.descriptor(j)).sqrt() + location[j]
+            };
+            let mut best = cost(first);
+            for (j, &b) in lower.iter().enumerate() {
+                if b < best && j != first {
+                    best = best.min(cost(j));
+                }
+            }
+            total += best;
         }
-        total += best;
+        total / reps.samples.len() as f32
     }
-    total / reps.samples.len() as f32
 }
 
 /// Relative and absolute margins on the pruning stage's squared bounds (see
@@ -1219,18 +1210,13 @@ const PRUNE_BOUND_SLACK: f32 = 1e-8;
 avx2_dispatch! {
     /// The `pair_cost` of every query sample (rows) with every template sample (columns),
     /// row-major into `cost`.
-    fn cost_matrix(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) =
-        cost_matrix_body
-}
-
-/// The body of [`cost_matrix`], inlined into each instruction-set variant.
-#[inline(always)]
-fn cost_matrix_body(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
-    cost.clear();
-    cost.reserve(q.len() * t.len());
-    for i in 0..q.len() {
-        for j in 0..t.len() {
-            cost.push(pair_cost(q, i, t, j, lw) as f64);
+    fn cost_matrix(q: &SurfaceContext, t: &SurfaceContext, lw: f32, cost: &mut Vec<f64>) {
+        cost.clear();
+        cost.reserve(q.len() * t.len());
+        for i in 0..q.len() {
+            for j in 0..t.len() {
+                cost.push(pair_cost(q, i, t, j, lw) as f64);
+            }
         }
     }
 }
