@@ -143,6 +143,21 @@ pub struct FitResult {
 }
 
 impl FitResult {
+    /// The result of an EM run as it stands, with `labels` its H×W label image.
+    fn from_em(model: &BodyModel, em: EmResult, labels: Vec<i16>) -> Self {
+        FitResult {
+            pose: em.pose,
+            joints: model.joints(&em.pose),
+            labels,
+            energy: em.energy,
+            energy_trace: em.energy_trace,
+            iterations: em.iterations,
+            termination: em.termination,
+            part_counts: em.part_counts,
+            outliers: em.outliers,
+        }
+    }
+
     pub fn converged(&self) -> bool {
         self.termination != EmTermination::MaxIterations
     }
@@ -271,17 +286,8 @@ impl FitProblem {
             });
         let Some((sub_cloud, sub_cam, sub_graph)) = &self.sub else {
             let em = hard_em_from(model, &cloud.points, graph, init, resume, prior, &config.em)?;
-            return Ok(FitResult {
-                pose: em.pose,
-                joints: model.joints(&em.pose),
-                labels: label_image(cloud, &em.labels),
-                energy: em.energy,
-                energy_trace: em.energy_trace,
-                iterations: em.iterations,
-                termination: em.termination,
-                part_counts: em.part_counts,
-                outliers: em.outliers,
-            });
+            let labels = label_image(cloud, &em.labels);
+            return Ok(FitResult::from_em(model, em, labels));
         };
         // EM on the sub-sampled cloud. The data term sums over s² times fewer points, so
         // the prior weight shrinks by s² to keep the balance of the full-resolution fit.
@@ -307,17 +313,7 @@ impl FitProblem {
             for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
                 labels[full_resolution_pixel(px as usize, sw, s, w)] = l as i16;
             }
-            return Ok(FitResult {
-                pose: em.pose,
-                joints: model.joints(&em.pose),
-                labels,
-                energy: em.energy,
-                energy_trace: em.energy_trace,
-                iterations: em.iterations,
-                termination: em.termination,
-                part_counts: em.part_counts,
-                outliers: em.outliers,
-            });
+            return Ok(FitResult::from_em(model, em, labels));
         }
         // Then every full-resolution pixel: starting from the label of its sub-sampled
         // pixel (the one at the top-left of its s×s block) or, without one (no reading
@@ -354,16 +350,14 @@ impl FitProblem {
             tau,
             &final_em,
         )?;
+        // The full-resolution labelling's energy and counts replace the EM's.
+        let energy = crf + prior.map_or(0.0, |p| p.cost(&em.pose));
+        let labels = label_image(cloud, &final_labels.labels);
         Ok(FitResult {
-            pose: em.pose,
-            joints: model.joints(&em.pose),
-            labels: label_image(cloud, &final_labels.labels),
-            energy: crf + prior.map_or(0.0, |p| p.cost(&em.pose)),
-            energy_trace: em.energy_trace,
-            iterations: em.iterations,
-            termination: em.termination,
+            energy,
             part_counts: final_labels.part_counts,
             outliers: final_labels.outliers,
+            ..FitResult::from_em(model, em, labels)
         })
     }
 }
