@@ -1344,9 +1344,10 @@ mod tests {
         }
     }
 
-    /// Reference for the candidate lists: the same expansion loop with the lists
-    /// rebuilt from every node before each move (what a scan over all nodes visits).
-    #[allow(clippy::needless_range_loop)] // written as `alpha_expansion` is
+    /// Reference for the candidate lists: expansion cycles with the lists rebuilt from
+    /// every node before each move (what a scan over all nodes visits). Unlike
+    /// `alpha_expansion` it retries moves that failed on the same labels, which cannot
+    /// change the result: the optimal move of the same labels fails again.
     fn expansion_rebuilding_candidates(
         p: &CrfProblem<i64>,
         init: &[i32],
@@ -1357,23 +1358,15 @@ mod tests {
         s.prepare_expansion(&c);
         let mut labels = init.to_vec();
         let mut e = c.energy(&labels);
-        let mut version = 0usize;
-        let mut failed_at = vec![usize::MAX; c.l];
         for _ in 0..cycles {
             let mut improved = false;
-            for alpha in 0..c.l {
-                if !c.allowed_somewhere[alpha] || failed_at[alpha] == version {
-                    continue;
-                }
+            for alpha in 0..c.l as i32 {
                 s.collect_candidates(&c, &labels);
-                let new_e = s.expansion_move(&c, &labels, alpha as i32, &e);
+                let new_e = s.expansion_move(&c, &labels, alpha, &e);
                 if new_e.lt(&e) {
                     labels.copy_from_slice(&s.candidate);
                     e = new_e;
-                    version += 1;
                     improved = true;
-                } else {
-                    failed_at[alpha] = version;
                 }
             }
             if !improved {
@@ -1400,18 +1393,7 @@ mod tests {
             metric in any::<bool>(),
         ) {
             let n = w * h;
-            let mut edges = Vec::new();
-            for r in 0..h {
-                for c in 0..w {
-                    let i = (r * w + c) as u32;
-                    if c + 1 < w {
-                        edges.push([i, i + 1]);
-                    }
-                    if r + 1 < h {
-                        edges.push([i, i + w as u32]);
-                    }
-                }
-            }
+            let edges = crate::graphcut::grid_edges(h, w, 4).unwrap();
             let p = Prob {
                 l,
                 unary: unary_seed[..n * l].to_vec(),
