@@ -503,13 +503,15 @@ pub struct CrfSolver<C: Cost> {
     /// Per node, in the current expansion move: may switch to α (not labelled α, not
     /// pruned). Only free nodes are in the cut. All false between moves.
     is_free: Vec<bool>,
-    /// Per label α, during one `alpha_expansion` call: every node that could be free in
-    /// α's move (a superset: each node that passed the pruning test for α at the start
-    /// of the call or when it last switched label; duplicates allowed), so that a move
-    /// visits these instead of every node. `sorted[α]`: the list is ascending and
-    /// without duplicates.
-    candidates: Vec<Vec<u32>>,
-    sorted: Vec<bool>,
+    /// Per label α, during one `alpha_expansion` call: a bit set of every node that
+    /// could be free in α's move (a superset: each node that passed the pruning test for
+    /// α at the start of the call or when it last switched label), so that a move visits
+    /// these instead of every node. Label-major rows of `candidate_words` words. A bit set
+    /// iterates in ascending node order and holds no duplicates for free; sorted lists
+    /// cost a sort per move, which on dense problems (most nodes candidates for most
+    /// labels) took longer than the full scan they replace.
+    candidates: Vec<u64>,
+    candidate_words: usize,
     /// The free nodes of the current move, ascending; then those that switched.
     free: Vec<u32>,
     /// Node → incident edges (CSR, ascending edge index, self-loops left out).
@@ -576,7 +578,7 @@ impl<C: Cost> CrfSolver<C> {
             incident_weight: vec![None; n_nodes],
             is_free: vec![false; n_nodes],
             candidates: Vec::new(),
-            sorted: Vec::new(),
+            candidate_words: n_nodes.div_ceil(64),
             free: Vec::new(),
             adj_start,
             adj,
@@ -693,32 +695,33 @@ impl<C: Cost> CrfSolver<C> {
         }
     }
 
-    /// The per-label candidate lists of one `alpha_expansion` call: one pass over the
+    /// The per-label candidate sets of one `alpha_expansion` call: one pass over the
     /// nodes' unary rows instead of one per move.
     fn collect_candidates(&mut self, c: &Checked<C>, labels: &[i32]) {
-        self.candidates.resize_with(c.l, Vec::new);
-        self.candidates.iter_mut().for_each(Vec::clear);
-        self.sorted.clear();
-        self.sorted.resize(c.l, true);
+        let words = self.candidate_words;
+        self.candidates.clear();
+        self.candidates.resize(c.l * words, 0);
         for (i, &fi) in labels.iter().enumerate() {
             let fi = fi as usize;
+            let (w, bit) = (i / 64, 1u64 << (i % 64));
             for a in 0..c.l {
                 if a != fi && self.may_switch(c, i, fi, a) {
-                    self.candidates[a].push(i as u32);
+                    self.candidates[a * words + w] |= bit;
                 }
             }
         }
     }
 
     /// After an accepted move of `alpha`: the nodes that switched (`self.free`) join
-    /// the lists of the labels they may now switch to.
+    /// the sets of the labels they may now switch to.
     fn add_switched_candidates(&mut self, c: &Checked<C>, alpha: usize) {
+        let words = self.candidate_words;
         for k in 0..self.free.len() {
             let i = self.free[k] as usize;
+            let (w, bit) = (i / 64, 1u64 << (i % 64));
             for a in 0..c.l {
                 if a != alpha && self.may_switch(c, i, alpha, a) {
-                    self.candidates[a].push(i as u32);
-                    self.sorted[a] = false;
+                    self.candidates[a * words + w] |= bit;
                 }
             }
         }
@@ -758,22 +761,32 @@ impl<C: Cost> CrfSolver<C> {
         // parts this removes most nodes from most moves (points far from segment α).
         // The nodes left, not labelled α, are the free ones.
         // Only α's candidates can pass (see `candidates`); visited in ascending order, so
-        // the move is the one a scan over every node would build.
-        if !self.sorted[a] {
-            self.candidates[a].sort_unstable();
-            self.candidates[a].dedup();
-            self.sorted[a] = true;
-        }
+        // the move is the one a scan over every node would build. A candidate that is
+        // not free leaves α's set: it can become free only by switching label, which
+        // puts it back (`add_switched_candidates`).
         self.free.clear();
-        for &iu in &self.candidates[a] {
-            let i = iu as usize;
-            let fi = labels[i];
-            if fi != alpha && self.may_switch(c, i, fi as usize, a) {
-                self.e0[i] = c.u_graph(i, fi as usize);
-                self.e1[i] = c.u_graph(i, a);
-                self.is_free[i] = true;
-                self.free.push(iu);
+        let words = self.candidate_words;
+        for w in 0..words {
+            let mut bits = self.candidates[a * words + w];
+            if bits == 0 {
+                continue;
             }
+            let mut kept = bits;
+            while bits != 0 {
+                let b = bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let i = w * 64 + b;
+                let fi = labels[i];
+                if fi != alpha && self.may_switch(c, i, fi as usize, a) {
+                    self.e0[i] = c.u_graph(i, fi as usize);
+                    self.e1[i] = c.u_graph(i, a);
+                    self.is_free[i] = true;
+                    self.free.push(i as u32);
+                } else {
+                    kept &= !(1u64 << b);
+                }
+            }
+            self.candidates[a * words + w] = kept;
         }
         // Edge terms, x = 1 meaning "switch to α", fixed nodes at x = 0 and α nodes at
         // α either way. Each free node adds its own terms, edge by edge in ascending
@@ -1344,7 +1357,7 @@ mod tests {
         }
     }
 
-    /// Reference for the candidate lists: expansion cycles with the lists rebuilt from
+    /// Reference for the candidate sets: expansion cycles with the sets rebuilt from
     /// every node before each move (what a scan over all nodes visits). Unlike
     /// `alpha_expansion` it retries moves that failed on the same labels, which cannot
     /// change the result: the optimal move of the same labels fails again.
@@ -1379,17 +1392,19 @@ mod tests {
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
 
-        /// The per-label candidate lists, kept up to date as nodes switch, give exactly
-        /// the labelling of lists rebuilt before every move: no node that may switch is
+        /// The per-label candidate sets, kept up to date as nodes switch (and pruned of
+        /// the nodes a move finds fixed), give exactly the labelling of sets rebuilt
+        /// before every move: no node that may switch is
         /// ever missed. Grids with spread unaries, so that pruning and switching both
         /// happen many times.
         #[test]
         fn candidate_lists_match_rebuilt_lists(
-            w in 2usize..7,
-            h in 2usize..7,
+            // Up to 144 nodes: the candidate sets span several 64-bit words.
+            w in 2usize..13,
+            h in 2usize..13,
             l in 2usize..6,
-            unary_seed in prop::collection::vec(0i64..40, 36 * 6),
-            weight_seed in prop::collection::vec(0i64..12, 2 * 36),
+            unary_seed in prop::collection::vec(0i64..40, 144 * 6),
+            weight_seed in prop::collection::vec(0i64..12, 2 * 144),
             metric in any::<bool>(),
         ) {
             let n = w * h;
