@@ -721,15 +721,44 @@ impl TemplateDatabase {
             components: k,
         };
         let lw = config.location_weight as f32;
+        // Early give-up, exact: a template's sum over the representatives only grows
+        // (every pair cost is ≥ 0, and adding a non-negative f32 never lowers a sum), so
+        // once its partial sum exceeds the sum of the `keep`-th best template finished
+        // so far, `keep` templates score strictly lower and it cannot make the short
+        // list. Most templates are far worse than the short list and stop after a few
+        // representatives. The finished sums' `keep` smallest live in a shared heap; the
+        // current limit is read lock-free (f32 bits of non-negative sums order as u32).
+        let keep = config.shortlist.min(self.templates.len());
+        let best_sums = std::sync::Mutex::new(std::collections::BinaryHeap::<u32>::new());
+        let limit = std::sync::atomic::AtomicU32::new(f32::INFINITY.to_bits());
+        let finished = |sum: f32| {
+            let bits = sum.to_bits();
+            let mut heap = best_sums.lock().unwrap_or_else(|e| e.into_inner());
+            if heap.len() < keep {
+                heap.push(bits);
+            } else if heap.peek().is_some_and(|&top| bits < top) {
+                heap.pop();
+                heap.push(bits);
+            }
+            if heap.len() == keep {
+                if let Some(&top) = heap.peek() {
+                    limit.fetch_min(top, std::sync::atomic::Ordering::Relaxed);
+                }
+            }
+        };
+        let n_reps = reps.samples.len() as f32;
         let mut scores: Vec<(f64, usize)> = self
             .templates
             .par_iter()
             .zip(&self.prune.projected)
             .enumerate()
             .map_init(Vec::new, |scratch, (t, (tpl, projected))| {
-                let score = prune_score(query, &reps, &tpl.context, projected, lw, scratch);
-                (score as f64, t)
+                let give_up = f32::from_bits(limit.load(std::sync::atomic::Ordering::Relaxed));
+                let sum = prune_sum(query, &reps, &tpl.context, projected, lw, give_up, scratch)?;
+                finished(sum);
+                Some(((sum / n_reps) as f64, t))
             })
+            .flatten()
             .collect();
         scores.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
         let shortlist: Vec<usize> = scores[..config.shortlist.min(scores.len())]
@@ -1133,8 +1162,9 @@ macro_rules! avx2_dispatch {
 }
 
 avx2_dispatch! {
-    /// Pruning score: mean over representatives of the cost of their nearest template
-    /// sample.
+    /// Pruning score × the number of representatives: the sum over representatives of
+    /// the cost of their nearest template sample, or `None` as soon as the partial sum
+    /// exceeds `give_up` (representatives in order; the sum only grows).
     ///
     /// Exact, but pruned. Per representative, vectorised passes over all template samples
     /// give each pair a lower bound of its cost: the position term plus the bound of the
@@ -1145,14 +1175,15 @@ avx2_dispatch! {
     /// term alone).
     /// `t_projected` is the template's component-major description; `scratch` is reused
     /// storage.
-    fn prune_score(
+    fn prune_sum(
         q: &SurfaceContext,
         reps: &Representatives,
         t: &SurfaceContext,
         t_projected: &[f32],
         lw: f32,
+        give_up: f32,
         scratch: &mut Vec<f32>,
-    ) -> f32 {
+    ) -> Option<f32> {
         let (k, n) = (reps.components, t.len());
         scratch.clear();
         scratch.resize(2 * n, 0.0);
@@ -1196,13 +1227,16 @@ avx2_dispatch! {
                 }
             }
             total += best;
+            if total > give_up {
+                return None;
+            }
         }
-        total / reps.samples.len() as f32
+        Some(total)
     }
 }
 
 /// Relative and absolute margins on the pruning stage's squared bounds (see
-/// [`prune_score`]), far above the rounding of the descriptions and sums (~1e-6
+/// [`prune_sum`]), far above the rounding of the descriptions and sums (~1e-6
 /// relative) and far below the squared costs that matter (~1e-3).
 const PRUNE_BOUND_MARGIN: f32 = 1.001;
 const PRUNE_BOUND_SLACK: f32 = 1e-8;
@@ -1425,12 +1459,82 @@ mod tests {
                         })
                         .sum::<f32>()
                         / samples.len() as f32;
-                    let fast =
-                        prune_score(q, &reps, tc, &db.prune.projected[t], lw, &mut Vec::new());
+                    let projected = &db.prune.projected[t];
+                    let sum =
+                        prune_sum(q, &reps, tc, projected, lw, f32::INFINITY, &mut Vec::new());
+                    let fast = sum.unwrap() / samples.len() as f32;
+                    // Giving up below the sum stops; at the sum (or above) it does not.
+                    let s = sum.unwrap();
+                    let at = prune_sum(q, &reps, tc, projected, lw, s, &mut Vec::new());
+                    assert_eq!(at, Some(s));
+                    if s > 0.0 {
+                        let below =
+                            prune_sum(q, &reps, tc, projected, lw, s * 0.999, &mut Vec::new());
+                        assert_eq!(below, None);
+                    }
                     assert!(
                         (fast - brute).abs() <= 1e-5 * (1.0 + brute),
                         "template {t}, lw {lw}: {fast} vs {brute}"
                     );
+                }
+            }
+        }
+    }
+
+    /// The short list with the early give-up is the exhaustive ranking's: the best
+    /// `shortlist` templates by the full pruning score (ties by index), with the same
+    /// scores.
+    #[test]
+    fn shortlist_with_give_up_equals_full_ranking() {
+        let db = super::eval::database();
+        let cam = Camera::itop();
+        let mut rng = super::eval::Rng(11);
+        let k = db.prune.components;
+        for t in [17usize, 260, 600, 750] {
+            let (depth, _) = super::eval::query(t, &mut rng, &cam, 0.1);
+            let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+            let d = &db.config.descriptor;
+            let sil = Silhouette::from_depth(&view, &cam, None, d.normal_radius).unwrap();
+            let q = sil.surface_context(d).unwrap();
+            for shortlist in [1usize, 5, 16, 40] {
+                let config = MatchConfig {
+                    shortlist,
+                    top_k: shortlist,
+                    ..Default::default()
+                };
+                let samples = representatives(&q, config.representatives);
+                let mut projected = vec![0.0f32; samples.len() * k];
+                for (&i, out) in samples.iter().zip(projected.chunks_exact_mut(k)) {
+                    db.prune.project(q.descriptor(i), out);
+                }
+                let reps = Representatives {
+                    samples: &samples,
+                    projected: &projected,
+                    components: k,
+                };
+                let lw = config.location_weight as f32;
+                let mut full: Vec<(f64, usize)> = (0..db.len())
+                    .map(|t| {
+                        let tc = &db.templates[t].context;
+                        let sum = prune_sum(
+                            &q,
+                            &reps,
+                            tc,
+                            &db.prune.projected[t],
+                            lw,
+                            f32::INFINITY,
+                            &mut Vec::new(),
+                        );
+                        ((sum.unwrap() / samples.len() as f32) as f64, t)
+                    })
+                    .collect();
+                full.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+                let want: Vec<usize> = full[..shortlist].iter().map(|s| s.1).collect();
+                let got = db.match_context(&q, &config).unwrap();
+                assert_eq!(got.shortlist, want, "query {t}, shortlist {shortlist}");
+                for c in &got.candidates {
+                    let score = full.iter().find(|s| s.1 == c.index).unwrap().0;
+                    assert_eq!(c.prune_cost, score);
                 }
             }
         }
