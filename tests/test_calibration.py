@@ -121,6 +121,7 @@ def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
         ("candidate_stride", 0),
         ("candidate_stride", 1.5),
         ("recheck_hypotheses", 0),
+        ("lost_hypotheses", 0),
         ("final_stride", 0),
         ("final_stride", 9),
         ("finals", 0),
