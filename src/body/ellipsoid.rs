@@ -101,27 +101,32 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
     u
 }
 
-/// Queries solved together by [`SortedPlacement::signed_distances_batched`].
-pub const LANES: usize = 4;
+/// Queries solved together by [`SortedPlacement::signed_distances_batched`]: two AVX2
+/// registers of four (see [`solve_secular_lanes`]).
+pub const LANES: usize = 8;
+const _: () = assert!(
+    LANES.is_multiple_of(4),
+    "whole groups and registers of four"
+);
 
-/// [`solve_secular`] for [`LANES`] independent 3-term problems sharing `b`, in lockstep:
+/// [`solve_secular`] for `N` independent 3-term problems sharing `b`, in lockstep:
 /// the same arithmetic and stopping rule lane by lane (so bit-identical results), but
 /// the lanes' divisions and square roots are independent, so the CPU overlaps them
 /// instead of waiting on one dependency chain.
 #[inline]
-fn solve_secular_lanes(
-    a: &[[f64; 3]; LANES],
+fn solve_secular_lockstep<const N: usize>(
+    a: &[[f64; 3]; N],
     b: &[f64; 3],
-    mut lo: [f64; LANES],
-    mut hi: [f64; LANES],
-) -> [f64; LANES] {
+    mut lo: [f64; N],
+    mut hi: [f64; N],
+) -> [f64; N] {
     let mut u = lo;
-    let mut out = [0.0; LANES];
-    let mut done = [false; LANES];
+    let mut out = [0.0; N];
+    let mut done = [false; N];
     for _ in 0..MAX_ITERATIONS {
-        let mut s = [0.0; LANES];
-        let mut ds = [0.0; LANES];
-        for l in 0..LANES {
+        let mut s = [0.0; N];
+        let mut ds = [0.0; N];
+        for l in 0..N {
             let invs = reciprocals(u[l], b);
             for k in 0..3 {
                 let inv = invs[k];
@@ -132,7 +137,7 @@ fn solve_secular_lanes(
             }
         }
         let mut all_done = true;
-        for l in 0..LANES {
+        for l in 0..N {
             if done[l] {
                 continue;
             }
@@ -165,12 +170,170 @@ fn solve_secular_lanes(
             return out;
         }
     }
-    for l in 0..LANES {
+    for l in 0..N {
         if !done[l] {
             out[l] = u[l];
         }
     }
     out
+}
+
+/// [`solve_secular_lockstep`] on the [`LANES`] lanes four at a time: without vector
+/// instructions more lanes in lockstep gained nothing (measured) and each extra lane
+/// iterates as long as the slowest of its group.
+#[inline]
+fn solve_secular_lanes_portable(
+    a: &[[f64; 3]; LANES],
+    b: &[f64; 3],
+    lo: [f64; LANES],
+    hi: [f64; LANES],
+) -> [f64; LANES] {
+    let mut out = [0.0; LANES];
+    for g in (0..LANES).step_by(4) {
+        let quad = |v: &[f64; LANES]| -> [f64; 4] { std::array::from_fn(|l| v[g + l]) };
+        let aq: [[f64; 3]; 4] = std::array::from_fn(|l| a[g + l]);
+        out[g..g + 4].copy_from_slice(&solve_secular_lockstep(&aq, b, quad(&lo), quad(&hi)));
+    }
+    out
+}
+
+/// [`solve_secular_lanes_portable`], with the lanes four to an AVX2 register where the
+/// CPU has it (detected at run time): the same IEEE operations in the same order, lane by
+/// lane (no fused multiply-adds), so bit-identical results. Each step's division and
+/// square root then take one instruction per four lanes, and the two registers' long
+/// dependency chains overlap. With one register (4 lanes) the iteration waited on those
+/// latencies and was no faster than the scalar lanes; with two, a tracked fit is about a
+/// fifth faster (docs/fit.md).
+#[inline]
+fn solve_secular_lanes(
+    a: &[[f64; 3]; LANES],
+    b: &[f64; 3],
+    lo: [f64; LANES],
+    hi: [f64; LANES],
+) -> [f64; LANES] {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        return unsafe { solve_secular_lanes_avx2(a, b, lo, hi) };
+    }
+    solve_secular_lanes_portable(a, b, lo, hi)
+}
+
+/// The AVX2 body of [`solve_secular_lanes`]: each step of `solve_secular` on all lanes
+/// at once, four per register, the registers interleaved (each step's division and
+/// square root have a long latency; independent registers overlap them). A finished
+/// lane keeps its result while the others go on.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn solve_secular_lanes_avx2(
+    a: &[[f64; 3]; LANES],
+    b: &[f64; 3],
+    lo: [f64; LANES],
+    hi: [f64; LANES],
+) -> [f64; LANES] {
+    use std::arch::x86_64::*;
+    const REGS: usize = LANES / 4;
+    type V = [__m256d; REGS];
+    #[inline(always)]
+    fn each(f: impl FnMut(usize) -> __m256d) -> V {
+        std::array::from_fn(f)
+    }
+    // _mm256_set_pd takes the lanes from the highest down.
+    let column = |k: usize| {
+        each(|g| {
+            let l = 4 * g;
+            _mm256_set_pd(a[l + 3][k], a[l + 2][k], a[l + 1][k], a[l][k])
+        })
+    };
+    let (a0, a1, a2) = (column(0), column(1), column(2));
+    let (b0, b1, b2) = (
+        _mm256_set1_pd(b[0]),
+        _mm256_set1_pd(b[1]),
+        _mm256_set1_pd(b[2]),
+    );
+    let one = _mm256_set1_pd(1.0);
+    let half = _mm256_set1_pd(0.5);
+    let h_tol = _mm256_set1_pd(H_TOLERANCE);
+    let root_tol = _mm256_set1_pd(ROOT_TOLERANCE);
+    let abs_mask = _mm256_castsi256_pd(_mm256_set1_epi64x(i64::MAX));
+    let all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+    let abs = |v: __m256d| _mm256_and_pd(v, abs_mask);
+    let mut lo: V = each(|g| _mm256_loadu_pd(lo[4 * g..].as_ptr()));
+    let mut hi: V = each(|g| _mm256_loadu_pd(hi[4 * g..].as_ptr()));
+    let mut u = lo;
+    let mut out: V = [_mm256_setzero_pd(); REGS];
+    // All ones in the lanes still iterating.
+    let mut going: V = [all; REGS];
+    for _ in 0..MAX_ITERATIONS {
+        let mut any = 0;
+        for g in 0..REGS {
+            // `reciprocals(u, b)`: 1/(u + b_k) through the prefix products.
+            let u = &mut u[g];
+            let (t0, t1, t2) = (
+                _mm256_add_pd(*u, b0),
+                _mm256_add_pd(*u, b1),
+                _mm256_add_pd(*u, b2),
+            );
+            let p01 = _mm256_mul_pd(t0, t1);
+            let inv = _mm256_div_pd(one, _mm256_mul_pd(p01, t2));
+            let r2 = _mm256_mul_pd(inv, p01);
+            let inv = _mm256_mul_pd(inv, t2);
+            let r1 = _mm256_mul_pd(inv, t0);
+            let r0 = _mm256_mul_pd(inv, t1);
+            let sq = |v: __m256d| _mm256_mul_pd(v, v);
+            let (q0, q1, q2) = (
+                sq(_mm256_mul_pd(a0[g], r0)),
+                sq(_mm256_mul_pd(a1[g], r1)),
+                sq(_mm256_mul_pd(a2[g], r2)),
+            );
+            let s = _mm256_add_pd(_mm256_add_pd(q0, q1), q2);
+            let ds = _mm256_add_pd(
+                _mm256_add_pd(_mm256_mul_pd(q0, r0), _mm256_mul_pd(q1, r1)),
+                _mm256_mul_pd(q2, r2),
+            );
+            let root = _mm256_sqrt_pd(s);
+            let root_m1 = _mm256_sub_pd(root, one);
+            let at_root = _mm256_cmp_pd::<_CMP_LE_OQ>(abs(root_m1), h_tol);
+            let above = _mm256_cmp_pd::<_CMP_GT_OQ>(root, one);
+            // blendv(x, y, m): y where m is set.
+            let lo_n = _mm256_blendv_pd(lo[g], *u, above);
+            let hi_n = _mm256_blendv_pd(*u, hi[g], above);
+            let newton = _mm256_add_pd(*u, _mm256_div_pd(_mm256_mul_pd(s, root_m1), ds));
+            let inside = _mm256_and_pd(
+                _mm256_cmp_pd::<_CMP_GT_OQ>(newton, lo_n),
+                _mm256_cmp_pd::<_CMP_LT_OQ>(newton, hi_n),
+            );
+            let bisect = _mm256_mul_pd(half, _mm256_add_pd(lo_n, hi_n));
+            let next = _mm256_blendv_pd(bisect, newton, inside);
+            let small_step = _mm256_or_pd(
+                _mm256_cmp_pd::<_CMP_LE_OQ>(
+                    abs(_mm256_sub_pd(next, *u)),
+                    _mm256_mul_pd(root_tol, abs(*u)),
+                ),
+                _mm256_cmp_pd::<_CMP_LE_OQ>(_mm256_sub_pd(hi_n, lo_n), _mm256_mul_pd(h_tol, hi_n)),
+            );
+            // A lane at the root returns u; else one with a small step returns next.
+            let go = going[g];
+            out[g] = _mm256_blendv_pd(out[g], next, _mm256_and_pd(go, small_step));
+            out[g] = _mm256_blendv_pd(out[g], *u, _mm256_and_pd(go, at_root));
+            let go = _mm256_andnot_pd(_mm256_or_pd(at_root, small_step), go);
+            *u = _mm256_blendv_pd(*u, next, go);
+            lo[g] = _mm256_blendv_pd(lo[g], lo_n, go);
+            hi[g] = _mm256_blendv_pd(hi[g], hi_n, go);
+            going[g] = go;
+            any |= _mm256_movemask_pd(go);
+        }
+        if any == 0 {
+            break;
+        }
+    }
+    // Lanes still going after the cap return their last iterate.
+    let mut result = [0.0; LANES];
+    for g in 0..REGS {
+        let o = _mm256_blendv_pd(out[g], u[g], going[g]);
+        _mm256_storeu_pd(result[4 * g..].as_mut_ptr(), o);
+    }
+    result
 }
 
 /// Closest point for sorted axes e0 ≥ e1 > 0 in 2-D, y ≥ 0.
@@ -886,6 +1049,53 @@ mod tests {
                 prop_assert_eq!(got, Some(d2));
             }
         }
+    }
+
+    /// The AVX2 root-finder gives, lane by lane, bit for bit what the portable lanes and
+    /// the scalar `solve_secular` give, over ellipsoids from near-spherical to flat and
+    /// points inside, near and far (checked only where the CPU has AVX2).
+    #[test]
+    fn root_finder_lanes_agree_bit_for_bit() {
+        let mut seed = 0x2545_F491_4F6C_DD1Du64;
+        let mut rnd = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut compared = 0;
+        for _ in 0..400 {
+            let radii = Vector3::new(0.02 + 0.4 * rnd(), 0.02 + 0.4 * rnd(), 0.02 + 0.4 * rnd());
+            let placed = PlacedEllipsoid {
+                centre: Vector3::zeros(),
+                rotation: Matrix3::identity(),
+                prepared: Prepared::new(&radii),
+            };
+            let fast = SortedPlacement::new(&placed);
+            let c = &fast.sorted;
+            let scale = [0.01, 0.3, 1.0, 3.0][(rnd() * 4.0) as usize];
+            let mut sa = [[0.0; 3]; LANES];
+            let (mut lo, mut hi) = ([0.0; LANES], [0.0; LANES]);
+            for l in 0..LANES {
+                let y = [rnd() * scale, rnd() * scale, (rnd() * scale).max(1e-9)];
+                (sa[l], lo[l], hi[l]) = c.secular_setup(&y);
+            }
+            let portable = solve_secular_lanes_portable(&sa, &c.b, lo, hi);
+            for l in 0..LANES {
+                let scalar = solve_secular(&sa[l], &c.b, lo[l], hi[l]);
+                assert_eq!(portable[l].to_bits(), scalar.to_bits());
+            }
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: AVX2 is present (checked just above).
+                let wide = unsafe { solve_secular_lanes_avx2(&sa, &c.b, lo, hi) };
+                for l in 0..LANES {
+                    assert_eq!(wide[l].to_bits(), portable[l].to_bits(), "lane {l}");
+                }
+                compared += 1;
+            }
+        }
+        eprintln!("AVX2 lanes compared on {compared} groups");
     }
 
     #[test]
