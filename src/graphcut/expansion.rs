@@ -16,6 +16,7 @@
 //! [`CrfSolver`] builds the graph structure once and reuses it (and all buffers) across
 //! moves and calls; the free functions are one-shot conveniences.
 
+use super::bitset::BitSet;
 use super::maxflow::{Capacity, Graph};
 use crate::error::{ensure, Error, Result};
 use rayon::prelude::*;
@@ -506,12 +507,11 @@ pub struct CrfSolver<C: Cost> {
     /// Per label α, during one `alpha_expansion` call: a bit set of every node that
     /// could be free in α's move (a superset: each node that passed the pruning test for
     /// α at the start of the call or when it last switched label), so that a move visits
-    /// these instead of every node. Label-major rows of `candidate_words` words. A bit set
-    /// iterates in ascending node order and holds no duplicates for free; sorted lists
-    /// cost a sort per move, which on dense problems (most nodes candidates for most
-    /// labels) took longer than the full scan they replace.
-    candidates: Vec<u64>,
-    candidate_words: usize,
+    /// these instead of every node. A bit set iterates in ascending node order and holds
+    /// no duplicates for free; sorted lists cost a sort per move, which on dense
+    /// problems (most nodes candidates for most labels) took longer than the full scan
+    /// they replace.
+    candidates: Vec<BitSet>,
     /// The free nodes of the current move, ascending; then those that switched.
     free: Vec<u32>,
     /// Node → incident edges (CSR, ascending edge index, self-loops left out).
@@ -578,7 +578,6 @@ impl<C: Cost> CrfSolver<C> {
             incident_weight: vec![None; n_nodes],
             is_free: vec![false; n_nodes],
             candidates: Vec::new(),
-            candidate_words: n_nodes.div_ceil(64),
             free: Vec::new(),
             adj_start,
             adj,
@@ -698,31 +697,27 @@ impl<C: Cost> CrfSolver<C> {
     /// The per-label candidate sets of one `alpha_expansion` call: one pass over the
     /// nodes' unary rows instead of one per move.
     fn collect_candidates(&mut self, c: &Checked<C>, labels: &[i32]) {
-        let words = self.candidate_words;
-        self.candidates.clear();
-        self.candidates.resize(c.l * words, 0);
+        self.candidates.resize_with(c.l, || BitSet::new(c.n));
+        self.candidates.iter_mut().for_each(BitSet::clear_all);
         for (i, &fi) in labels.iter().enumerate() {
-            let fi = fi as usize;
-            let (w, bit) = (i / 64, 1u64 << (i % 64));
-            for a in 0..c.l {
-                if a != fi && self.may_switch(c, i, fi, a) {
-                    self.candidates[a * words + w] |= bit;
-                }
-            }
+            self.add_candidate(c, i, fi as usize);
         }
     }
 
     /// After an accepted move of `alpha`: the nodes that switched (`self.free`) join
     /// the sets of the labels they may now switch to.
     fn add_switched_candidates(&mut self, c: &Checked<C>, alpha: usize) {
-        let words = self.candidate_words;
         for k in 0..self.free.len() {
-            let i = self.free[k] as usize;
-            let (w, bit) = (i / 64, 1u64 << (i % 64));
-            for a in 0..c.l {
-                if a != alpha && self.may_switch(c, i, alpha, a) {
-                    self.candidates[a * words + w] |= bit;
-                }
+            self.add_candidate(c, self.free[k] as usize, alpha);
+        }
+    }
+
+    /// Puts node `i`, labelled `fi`, in the set of every other label it may switch to.
+    #[inline]
+    fn add_candidate(&mut self, c: &Checked<C>, i: usize, fi: usize) {
+        for a in 0..c.l {
+            if a != fi && self.may_switch(c, i, fi, a) {
+                self.candidates[a].set(i);
             }
         }
     }
@@ -765,29 +760,20 @@ impl<C: Cost> CrfSolver<C> {
         // not free leaves α's set: it can become free only by switching label, which
         // puts it back (`add_switched_candidates`).
         self.free.clear();
-        let words = self.candidate_words;
-        for w in 0..words {
-            let mut bits = self.candidates[a * words + w];
-            if bits == 0 {
-                continue;
+        let mut candidates = std::mem::take(&mut self.candidates[a]);
+        let this = &mut *self;
+        candidates.retain(|i| {
+            let fi = labels[i];
+            let free = fi != alpha && this.may_switch(c, i, fi as usize, a);
+            if free {
+                this.e0[i] = c.u_graph(i, fi as usize);
+                this.e1[i] = c.u_graph(i, a);
+                this.is_free[i] = true;
+                this.free.push(i as u32);
             }
-            let mut kept = bits;
-            while bits != 0 {
-                let b = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let i = w * 64 + b;
-                let fi = labels[i];
-                if fi != alpha && self.may_switch(c, i, fi as usize, a) {
-                    self.e0[i] = c.u_graph(i, fi as usize);
-                    self.e1[i] = c.u_graph(i, a);
-                    self.is_free[i] = true;
-                    self.free.push(i as u32);
-                } else {
-                    kept &= !(1u64 << b);
-                }
-            }
-            self.candidates[a * words + w] = kept;
-        }
+            free
+        });
+        self.candidates[a] = candidates;
         // Edge terms, x = 1 meaning "switch to α", fixed nodes at x = 0 and α nodes at
         // α either way. Each free node adds its own terms, edge by edge in ascending
         // order; an edge between two free nodes gets its capacity from its first end.

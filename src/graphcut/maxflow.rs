@@ -17,6 +17,7 @@
 //! `< 0`: to the sink). For a 4-connected grid with `f64` or `i64` capacities this takes
 //! about 68.5 bytes per node (measured by [`Graph::memory_bytes`]).
 
+use super::bitset::BitSet;
 use crate::error::{Error, Result};
 use std::collections::VecDeque;
 use std::fmt::Debug;
@@ -226,34 +227,6 @@ fn sister_at(head_first: u32, overflow: &[(u32, u32)], a: usize, hw: u32) -> usi
     }
 }
 
-/// A bit per node.
-#[derive(Clone, Debug, Default)]
-struct BitSet(Vec<u64>);
-
-impl BitSet {
-    fn new(n: usize) -> Self {
-        BitSet(vec![0; n.div_ceil(64)])
-    }
-    #[inline(always)]
-    fn get(&self, i: usize) -> bool {
-        self.0[i >> 6] >> (i & 63) & 1 != 0
-    }
-    #[inline(always)]
-    fn set(&mut self, i: usize) {
-        self.0[i >> 6] |= 1 << (i & 63);
-    }
-    #[inline(always)]
-    fn clear(&mut self, i: usize) {
-        self.0[i >> 6] &= !(1 << (i & 63));
-    }
-    fn clear_all(&mut self) {
-        self.0.fill(0);
-    }
-    fn bytes(&self) -> usize {
-        self.0.capacity() * 8
-    }
-}
-
 /// The FIFO of active nodes. A fresh solve activates every node with a terminal arc at
 /// once; instead of queueing them all (4 bytes per node), a cursor sweeps the nodes in
 /// index order and takes those marked `initial`, before the ring of nodes activated
@@ -313,7 +286,7 @@ impl ActiveQueue {
     #[inline(always)]
     fn pop(&mut self) -> Option<u32> {
         while self.sweep < self.n {
-            let w = self.initial.0[self.sweep >> 6] >> (self.sweep & 63);
+            let w = self.initial.word(self.sweep >> 6) >> (self.sweep & 63);
             if w == 0 {
                 self.sweep = (self.sweep | 63) + 1;
                 continue;

@@ -2,6 +2,7 @@
 //! solvers built on it ([`expansion`]: alpha-expansion and alpha-beta swap), used by the
 //! E-step of the pose fit to label points with body parts.
 
+mod bitset;
 pub mod expansion;
 pub mod maxflow;
 
