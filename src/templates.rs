@@ -709,17 +709,7 @@ impl TemplateDatabase {
                 query.dim, self.templates[0].context.dim
             )
         })?;
-        let reps = representatives(query, config.representatives);
-        let k = self.prune.components;
-        let mut reps_projected = vec![0.0f32; reps.len() * k];
-        for (&i, out) in reps.iter().zip(reps_projected.chunks_exact_mut(k.max(1))) {
-            self.prune.project(query.descriptor(i), out);
-        }
-        let reps = Representatives {
-            samples: &reps,
-            projected: &reps_projected,
-            components: k,
-        };
+        let reps = Representatives::new(&self.prune, query, config.representatives);
         let lw = config.location_weight as f32;
         // Early give-up, exact: a template's sum over the representatives only grows
         // (every pair cost is ≥ 0, and adding a non-negative f32 never lowers a sum), so
@@ -1130,10 +1120,28 @@ fn planar_distance(a: [f32; 2], b: [f32; 2]) -> f32 {
 
 /// The query samples the pruning stage scores with, and their projections onto the
 /// [`PruneIndex`] basis (samples × components).
-struct Representatives<'a> {
-    samples: &'a [usize],
-    projected: &'a [f32],
+struct Representatives {
+    samples: Vec<usize>,
+    projected: Vec<f32>,
     components: usize,
+}
+
+impl Representatives {
+    /// `count` samples of `query` spread over the body ([`representatives`]), projected
+    /// onto `index`'s basis.
+    fn new(index: &PruneIndex, query: &SurfaceContext, count: usize) -> Self {
+        let samples = representatives(query, count);
+        let k = index.components;
+        let mut projected = vec![0.0f32; samples.len() * k];
+        for (&i, out) in samples.iter().zip(projected.chunks_exact_mut(k.max(1))) {
+            index.project(query.descriptor(i), out);
+        }
+        Representatives {
+            samples,
+            projected,
+            components: k,
+        }
+    }
 }
 
 /// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
@@ -1429,24 +1437,11 @@ mod tests {
         let mut rng = super::eval::Rng(7);
         let mut queries = vec![db.templates[123].context.clone()];
         for t in [5usize, 300, 700] {
-            let (depth, _) = super::eval::query(t, &mut rng, &cam, 0.1);
-            let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
-            let d = &db.config.descriptor;
-            let sil = Silhouette::from_depth(&view, &cam, None, d.normal_radius).unwrap();
-            queries.push(sil.surface_context(d).unwrap());
+            queries.push(super::eval::query_context(db, t, &mut rng, &cam));
         }
-        let k = db.prune.components;
         for q in &queries {
-            let samples = representatives(q, 8);
-            let mut projected = vec![0.0f32; samples.len() * k];
-            for (&i, out) in samples.iter().zip(projected.chunks_exact_mut(k)) {
-                db.prune.project(q.descriptor(i), out);
-            }
-            let reps = Representatives {
-                samples: &samples,
-                projected: &projected,
-                components: k,
-            };
+            let reps = Representatives::new(&db.prune, q, 8);
+            let samples = &reps.samples;
             for t in (0..db.len()).step_by(17).chain([123, 767]) {
                 let tc = &db.templates[t].context;
                 for lw in [0.0f32, 0.1, 1.0] {
@@ -1489,29 +1484,16 @@ mod tests {
         let db = super::eval::database();
         let cam = Camera::itop();
         let mut rng = super::eval::Rng(11);
-        let k = db.prune.components;
         for t in [17usize, 260, 600, 750] {
-            let (depth, _) = super::eval::query(t, &mut rng, &cam, 0.1);
-            let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
-            let d = &db.config.descriptor;
-            let sil = Silhouette::from_depth(&view, &cam, None, d.normal_radius).unwrap();
-            let q = sil.surface_context(d).unwrap();
+            let q = super::eval::query_context(db, t, &mut rng, &cam);
             for shortlist in [1usize, 5, 16, 40] {
                 let config = MatchConfig {
                     shortlist,
                     top_k: shortlist,
                     ..Default::default()
                 };
-                let samples = representatives(&q, config.representatives);
-                let mut projected = vec![0.0f32; samples.len() * k];
-                for (&i, out) in samples.iter().zip(projected.chunks_exact_mut(k)) {
-                    db.prune.project(q.descriptor(i), out);
-                }
-                let reps = Representatives {
-                    samples: &samples,
-                    projected: &projected,
-                    components: k,
-                };
+                let reps = Representatives::new(&db.prune, &q, config.representatives);
+                let samples = &reps.samples;
                 let lw = config.location_weight as f32;
                 let mut full: Vec<(f64, usize)> = (0..db.len())
                     .map(|t| {
@@ -1668,6 +1650,21 @@ mod eval {
             }
         }
         (d, pose)
+    }
+
+    /// The surface contexts of [`query`]'s depth image of template `t` (joints perturbed
+    /// by up to 0.1 rad).
+    pub(super) fn query_context(
+        db: &TemplateDatabase,
+        t: usize,
+        rng: &mut Rng,
+        cam: &Camera,
+    ) -> SurfaceContext {
+        let (depth, _) = query(t, rng, cam, 0.1);
+        let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+        let d = &db.config.descriptor;
+        let sil = Silhouette::from_depth(&view, cam, None, d.normal_radius).unwrap();
+        sil.surface_context(d).unwrap()
     }
 
     #[test]
