@@ -27,7 +27,7 @@ STEP = 3
 
 
 def renders(db: dp.TemplateDatabase) -> tuple[np.ndarray, np.ndarray]:
-    poses = np.asarray(db._db.to_arrays()["poses"]).reshape(-1, 22)
+    poses = np.asarray(db.poses)
     cam, model = dp.Camera.itop(), dp.BodyModel()
     images = []
     for p in poses:
@@ -69,10 +69,10 @@ def main(argv: list[str] | None = None) -> int:
     n = len(roots)
     print(f"{n} templates, {len(sizes)} groups within {args.tolerance * 1000:.1f} mm")
     print("group sizes:", dict(sorted(Counter(sizes.values()).items())))
-    views = ["front", "left side", "right side"]
-    for v, name in enumerate(views):
-        idx = range(v * n // 3, (v + 1) * n // 3)
-        print(f"  {name}: {sum(1 for i in idx if sizes[roots[i]] > 1)} in a group of 2 or more")
+    views = db.views
+    for v, name in enumerate(["front", "left side", "right side"]):
+        paired = sum(1 for i in range(n) if views[i] == v and sizes[roots[i]] > 1)
+        print(f"  {name}: {paired} in a group of 2 or more")
     print(f"top-1 ceiling for any depth-only method: {len(sizes) / n:.3f}")
     return 0
 
