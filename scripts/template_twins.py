@@ -19,6 +19,7 @@ from collections import Counter
 
 import depthpose as dp
 import numpy as np
+from depthpose.templates import VIEWS
 
 #: Depth difference (m) counted for a pixel inside one silhouette only.
 MISMATCH = 0.2
@@ -70,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{n} templates, {len(sizes)} groups within {args.tolerance * 1000:.1f} mm")
     print("group sizes:", dict(sorted(Counter(sizes.values()).items())))
     views = db.views
-    for v, name in enumerate(["front", "left side", "right side"]):
+    for v, name in enumerate(VIEWS):
         paired = sum(1 for i in range(n) if views[i] == v and sizes[roots[i]] > 1)
         print(f"  {name}: {paired} in a group of 2 or more")
     print(f"top-1 ceiling for any depth-only method: {len(sizes) / n:.3f}")
