@@ -98,6 +98,16 @@ impl PoseGeometry {
         &idx[..*n]
     }
 
+    /// The 6-vector b of parameter `dof` such that d(signed distance)/d(dof) = q·b for
+    /// q = (n, p × n) (see the type's comment): b = (w, −a'). So the Jacobian of a
+    /// segment's points is Q·B (Q: one row q per point, B: one column b per parameter)
+    /// and JᵀJ = Bᵀ(QᵀQ)B: the points need only the 6×6 QᵀQ.
+    #[inline]
+    pub fn dof_basis(&self, dof: usize) -> [f64; 6] {
+        let (w, a) = (&self.moment[dof], &self.axis[dof]);
+        [w[0], w[1], w[2], -a[0], -a[1], -a[2]]
+    }
+
     /// d(signed distance)/d(parameter) of a point `p` on segment `k` whose closest-point
     /// normal is `n`, for the parameters of [`Self::segment_dofs`] in that order
     /// (written to the first entries of `out`; returns how many).

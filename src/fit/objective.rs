@@ -12,8 +12,6 @@
 use super::lm::{PoseObjective, N, NN};
 use crate::body::residuals::{PoseGeometry, MAX_SEGMENT_DOFS};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
-use faer::linalg::matmul::matmul;
-use faer::{Accum, MatMut, MatRef, Par};
 use rayon::prelude::*;
 
 /// Points per parallel chunk.
@@ -101,25 +99,31 @@ impl PointCost {
     }
 }
 
-/// One chunk's share of the normal equations, and its work space.
+/// Entries of a symmetric 6×6 matrix's upper triangle.
+const SYM6: usize = 21;
+
+/// Position of entry (a, b) of a symmetric 6×6 matrix in its packed upper triangle
+/// (row by row: (0,0) … (0,5), (1,1) … (5,5)).
+#[inline]
+fn sym6_index(a: usize, b: usize) -> usize {
+    let (a, b) = (a.min(b), a.max(b));
+    a * (11 - a) / 2 + b
+}
+
+/// One chunk's share of the normal equations, per segment: with q = (n, p × n) of each
+/// weighted point (see [`PoseGeometry::dof_basis`]), the upper triangle of Σ w q qᵀ and
+/// Σ w r q. The segment's parameters enter only when the chunks are summed.
 #[derive(Clone)]
 struct Accumulator {
-    h: [f64; NN],
-    g: [f64; N],
-    /// √w·J of one segment's run of points: column-major, `CHUNK_POINTS` rows per
-    /// column (one column per degree of freedom of the segment).
-    jw: Vec<f64>,
-    /// √w·r of the same points.
-    rw: Vec<f64>,
+    qq: [[f64; SYM6]; NUM_SEGMENTS],
+    qr: [[f64; 6]; NUM_SEGMENTS],
 }
 
 impl Default for Accumulator {
     fn default() -> Self {
         Accumulator {
-            h: [0.0; NN],
-            g: [0.0; N],
-            jw: vec![0.0; CHUNK_POINTS * MAX_SEGMENT_DOFS],
-            rw: vec![0.0; CHUNK_POINTS],
+            qq: [[0.0; SYM6]; NUM_SEGMENTS],
+            qr: [[0.0; 6]; NUM_SEGMENTS],
         }
     }
 }
@@ -294,14 +298,10 @@ impl PoseObjective for PointObjective<'_> {
             .zip(self.distance.par_chunks(CHUNK_POINTS))
             .zip(self.normal.par_chunks(CHUNK_POINTS))
             .for_each(|((((acc, idx), seg), dist), normal)| {
-                acc.h.fill(0.0);
-                acc.g.fill(0.0);
-                // Each segment's run of points: its weighted Jacobian rows share the
-                // segment's degrees of freedom, so JᵀWJ is one dense product.
+                *acc = Accumulator::default();
                 for (k, run) in segment_runs(seg) {
-                    let dofs = geo.segment_dofs(k);
-                    let n = dofs.len();
-                    let mut m = 0;
+                    // Local copies keep the 27 sums in registers.
+                    let (mut qq, mut qr) = (acc.qq[k], acc.qr[k]);
                     for r in run {
                         let d = dist[r];
                         let (_, w) = pc.cost_and_weight(d);
@@ -309,55 +309,60 @@ impl PoseObjective for PointObjective<'_> {
                             continue;
                         }
                         let p = vec3(&points[idx[r] as usize]);
-                        let mut jrow = [0.0; MAX_SEGMENT_DOFS];
-                        geo.jacobian_row(k, &p, &normal[r], &mut jrow);
-                        let sw = w.sqrt();
-                        for (a, j) in jrow[..n].iter().enumerate() {
-                            acc.jw[a * CHUNK_POINTS + m] = sw * j;
-                        }
-                        acc.rw[m] = sw * d;
-                        m += 1;
-                    }
-                    if m == 0 {
-                        continue;
-                    }
-                    let jw = MatRef::from_column_major_slice_with_stride(
-                        &acc.jw[..(n - 1) * CHUNK_POINTS + m],
-                        m,
-                        n,
-                        CHUNK_POINTS,
-                    );
-                    let mut local = [0.0; MAX_SEGMENT_DOFS * MAX_SEGMENT_DOFS];
-                    matmul(
-                        MatMut::from_column_major_slice_mut(&mut local[..n * n], n, n),
-                        Accum::Replace,
-                        jw.transpose(),
-                        jw,
-                        1.0,
-                        Par::Seq,
-                    );
-                    for a in 0..n {
-                        let col = &acc.jw[a * CHUNK_POINTS..a * CHUNK_POINTS + m];
-                        acc.g[dofs[a]] += col
-                            .iter()
-                            .zip(&acc.rw[..m])
-                            .map(|(x, y)| x * y)
-                            .sum::<f64>();
-                        // Upper triangle in dof order (`dofs` ascends); mirrored at the end.
-                        for b in a..n {
-                            acc.h[dofs[a] * N + dofs[b]] += local[b * n + a];
+                        let n = &normal[r];
+                        let q = [
+                            n[0],
+                            n[1],
+                            n[2],
+                            p[1] * n[2] - p[2] * n[1],
+                            p[2] * n[0] - p[0] * n[2],
+                            p[0] * n[1] - p[1] * n[0],
+                        ];
+                        let mut e = 0;
+                        for a in 0..6 {
+                            let wq = w * q[a];
+                            qr[a] += wq * d;
+                            for &qb in &q[a..] {
+                                qq[e] += wq * qb;
+                                e += 1;
+                            }
                         }
                     }
+                    acc.qq[k] = qq;
+                    acc.qr[k] = qr;
                 }
             });
         h.fill(0.0);
         g.fill(0.0);
-        for acc in &self.chunks {
-            for (o, v) in h.iter_mut().zip(&acc.h) {
-                *o += v;
+        for k in 0..NUM_SEGMENTS {
+            // The chunks' sums in chunk order (deterministic), then JᵀWJ = Bᵀ(QᵀWQ)B
+            // and JᵀWr = Bᵀ(QᵀWr) with B the segment's parameter basis.
+            let (mut qq, mut qr) = ([0.0; SYM6], [0.0; 6]);
+            for acc in &self.chunks {
+                for (o, v) in qq.iter_mut().zip(&acc.qq[k]) {
+                    *o += v;
+                }
+                for (o, v) in qr.iter_mut().zip(&acc.qr[k]) {
+                    *o += v;
+                }
             }
-            for (o, v) in g.iter_mut().zip(&acc.g) {
-                *o += v;
+            let s: [[f64; 6]; 6] =
+                std::array::from_fn(|a| std::array::from_fn(|b| qq[sym6_index(a, b)]));
+            let dofs = geo.segment_dofs(k);
+            let mut basis = [[0.0; 6]; MAX_SEGMENT_DOFS];
+            let mut s_basis = [[0.0; 6]; MAX_SEGMENT_DOFS];
+            for (j, &dof) in dofs.iter().enumerate() {
+                basis[j] = geo.dof_basis(dof);
+                for a in 0..6 {
+                    s_basis[j][a] = (0..6).map(|b| s[a][b] * basis[j][b]).sum();
+                }
+            }
+            for (i, &di) in dofs.iter().enumerate() {
+                g[di] += (0..6).map(|a| basis[i][a] * qr[a]).sum::<f64>();
+                // Upper triangle in dof order (`dofs` ascends); mirrored below.
+                for (j, &dj) in dofs.iter().enumerate().skip(i) {
+                    h[di * N + dj] += (0..6).map(|a| basis[i][a] * s_basis[j][a]).sum::<f64>();
+                }
             }
         }
         // Only the upper triangle (in dof order) was accumulated: mirror it.
@@ -446,6 +451,66 @@ mod tests {
                 for j in 0..N {
                     assert_eq!(h[i * N + j], h[j * N + i]);
                 }
+            }
+        }
+    }
+
+    /// The normal equations, summed per segment as Bᵀ(QᵀWQ)B, equal JᵀWJ and JᵀWr
+    /// built from the explicit Jacobian rows of [`BodyModel::residuals_and_jacobian`].
+    #[test]
+    fn normal_equations_equal_explicit_jacobian_products() {
+        let model = BodyModel::default();
+        for (seed, loss) in [
+            (1, Loss::Squared),
+            (4, Loss::Huber(0.03)),
+            (7, Loss::Cauchy(0.04)),
+        ] {
+            let pose = pose_for_tests(seed);
+            let (pts, labels) = scattered(&model, &pose, 2000);
+            let labels: Vec<i32> = labels
+                .iter()
+                .map(|&l| if l < NUM_SEGMENTS as i32 { l } else { -1 })
+                .collect();
+            let pc = PointCost {
+                sigma: 0.03,
+                loss,
+                truncation: 0.4,
+            };
+            let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+            let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+            obj.normal_equations(&pose, &mut h, &mut g);
+            let n = pts.len();
+            let (mut r, mut jac) = (vec![0.0; n], vec![0.0; n * N]);
+            model
+                .residuals_and_jacobian(&pts, &labels, &pose, &mut r, &mut jac)
+                .unwrap();
+            let (mut h_ref, mut g_ref) = ([0.0; NN], [0.0; N]);
+            let mut weighted = 0;
+            for i in (0..n).filter(|&i| labels[i] >= 0) {
+                let (_, w) = pc.cost_and_weight(r[i]);
+                weighted += (w > 0.0) as usize;
+                let row = &jac[i * N..(i + 1) * N];
+                for a in 0..N {
+                    g_ref[a] += w * row[a] * r[i];
+                    for b in 0..N {
+                        h_ref[a * N + b] += w * row[a] * row[b];
+                    }
+                }
+            }
+            assert!(weighted > 500, "{weighted} weighted points");
+            let scale = h_ref.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (i, (x, y)) in h.iter().zip(&h_ref).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-10 * scale,
+                    "{loss:?} H[{i}]: {x} vs {y}"
+                );
+            }
+            let scale = g_ref.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            for (i, (x, y)) in g.iter().zip(&g_ref).enumerate() {
+                assert!(
+                    (x - y).abs() <= 1e-10 * scale,
+                    "{loss:?} g[{i}]: {x} vs {y}"
+                );
             }
         }
     }
