@@ -281,22 +281,38 @@ impl BodyModel {
                     .zip(labels.par_chunks(CHUNK_POINTS)),
             )
             .for_each(|((res, jac), (pts, labs))| {
-                for (i, (p, &label)) in pts.iter().zip(labs).enumerate() {
-                    let row = &mut jac[i * NUM_PARAMS..(i + 1) * NUM_PARAMS];
-                    row.fill(0.0);
-                    if label < 0 {
-                        res[i] = 0.0;
-                        continue;
-                    }
-                    let k = label as usize;
-                    let p = [p[0] as f64, p[1] as f64, p[2] as f64];
-                    let (d, normal) = geo.segments[k].distance_and_normal(&p);
-                    res[i] = d;
-                    let mut j = [0.0; MAX_SEGMENT_DOFS];
-                    let count = geo.jacobian_row(k, &p, &normal, &mut j);
-                    for (&dof, v) in geo.segment_dofs(k).iter().zip(&j[..count]) {
-                        row[dof] = *v;
-                    }
+                res.fill(0.0);
+                jac.fill(0.0);
+                // The chunk's labelled points grouped by segment (counting sort), so
+                // each segment's distances go through the lockstep root-finder.
+                let mut start = [0usize; NUM_SEGMENTS + 1];
+                for &l in labs.iter().filter(|&&l| l >= 0) {
+                    start[l as usize + 1] += 1;
+                }
+                for k in 0..NUM_SEGMENTS {
+                    start[k + 1] += start[k];
+                }
+                let mut order = [0u16; CHUNK_POINTS];
+                let mut next = start;
+                for (i, &l) in labs.iter().enumerate().filter(|(_, &l)| l >= 0) {
+                    order[next[l as usize]] = i as u16;
+                    next[l as usize] += 1;
+                }
+                let vec3 = |i: usize| [pts[i][0] as f64, pts[i][1] as f64, pts[i][2] as f64];
+                for (k, e) in geo.segments.iter().enumerate() {
+                    let run = &order[start[k]..start[k + 1]];
+                    let items = run
+                        .iter()
+                        .map(|&i| (i as usize, e.local(&vec3(i as usize))));
+                    e.distances_and_normals_batched(items, |i, d, normal| {
+                        res[i] = d;
+                        let mut j = [0.0; MAX_SEGMENT_DOFS];
+                        let count = geo.jacobian_row(k, &vec3(i), &normal, &mut j);
+                        let row = &mut jac[i * NUM_PARAMS..(i + 1) * NUM_PARAMS];
+                        for (&dof, v) in geo.segment_dofs(k).iter().zip(&j[..count]) {
+                            row[dof] = *v;
+                        }
+                    });
                 }
             });
         Ok(())
@@ -423,6 +439,47 @@ mod tests {
                         .all(|v| *v == 0.0));
                 }
             }
+        }
+    }
+
+    /// Residuals and Jacobian rows over many chunks (the segments' points through the
+    /// lockstep root-finder) equal the one-point queries bit for bit.
+    #[test]
+    fn batched_residuals_equal_single_queries() {
+        use super::{PoseGeometry, MAX_SEGMENT_DOFS};
+        let m = BodyModel::default();
+        let pose = pose_for_tests(7);
+        let pts = cloud_around(&m, &pose, 3000, 3);
+        let labels: Vec<i32> = (0..pts.len())
+            .map(|i| {
+                if i % 11 == 10 {
+                    -1
+                } else {
+                    ((i * 7) % NUM_SEGMENTS) as i32
+                }
+            })
+            .collect();
+        let n = pts.len();
+        let (mut r, mut jac) = (vec![0.0; n], vec![0.0; n * NUM_PARAMS]);
+        m.residuals_and_jacobian(&pts, &labels, &pose, &mut r, &mut jac)
+            .unwrap();
+        let geo = PoseGeometry::new(&m, &pose);
+        for (i, &l) in labels.iter().enumerate().filter(|(_, &l)| l >= 0) {
+            let k = l as usize;
+            let p = [pts[i][0] as f64, pts[i][1] as f64, pts[i][2] as f64];
+            let (d, normal) = geo.segments[k].distance_and_normal(&p);
+            assert_eq!(r[i].to_bits(), d.to_bits(), "point {i}");
+            let mut j = [0.0; MAX_SEGMENT_DOFS];
+            let count = geo.jacobian_row(k, &p, &normal, &mut j);
+            let mut row = [0.0; NUM_PARAMS];
+            for (&dof, v) in geo.segment_dofs(k).iter().zip(&j[..count]) {
+                row[dof] = *v;
+            }
+            assert_eq!(
+                &jac[i * NUM_PARAMS..(i + 1) * NUM_PARAMS],
+                &row[..],
+                "point {i}"
+            );
         }
     }
 
