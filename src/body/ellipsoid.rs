@@ -724,7 +724,8 @@ impl SortedPlacement {
 
     /// Signed distances of many local points (from [`Self::local`]), [`LANES`] at a time
     /// through the lockstep root-finder: `emit(i, d)` receives each `(i, y)` of `items`
-    /// with the same value [`Self::signed_distance_local`] gives, in input order.
+    /// with the same value [`Self::signed_distance_local`] gives (points on a coordinate
+    /// plane at once, the others when their group of [`LANES`] fills or at the end).
     #[inline]
     pub fn signed_distances_batched(
         &self,
