@@ -45,6 +45,16 @@ impl RayQuadric {
     }
 }
 
+/// The ellipsoids as ray-casting quadrics, `labels_of[k]` the label of ellipsoid k
+/// (those the camera is inside are left out).
+fn ray_quadrics(ellipsoids: &[PlacedEllipsoid], labels_of: &[i16]) -> Vec<RayQuadric> {
+    ellipsoids
+        .iter()
+        .zip(labels_of)
+        .filter_map(|(e, &l)| RayQuadric::new(e, l))
+        .collect()
+}
+
 /// Renders the ellipsoids into caller buffers (`depth` H×W metres, 0 = no hit; `labels`
 /// H×W, [`BACKGROUND_LABEL`] = no hit). `labels_of[k]` is the label written for
 /// ellipsoid k.
@@ -80,11 +90,7 @@ pub fn render_ellipsoids_into(
             "needs one label per ellipsoid".to_string(),
         ));
     }
-    let quadrics: Vec<RayQuadric> = ellipsoids
-        .iter()
-        .zip(labels_of)
-        .filter_map(|(e, &l)| RayQuadric::new(e, l))
-        .collect();
+    let quadrics = ray_quadrics(ellipsoids, labels_of);
     let cam = *camera;
     depth
         .par_chunks_mut(w * ROWS_PER_TASK)
@@ -190,17 +196,18 @@ fn union(a: Option<(usize, usize)>, b: Option<(usize, usize)>) -> Option<(usize,
     }
 }
 
-impl BodyModel {
-    /// The posed body's segments as ray-casting quadrics (label = segment index).
-    fn ray_quadrics(&self, pose: &Pose) -> Vec<RayQuadric> {
-        let kin = Kinematics::new(self, pose);
-        self.placed_ellipsoids(&kin)
-            .iter()
-            .enumerate()
-            .filter_map(|(k, e)| RayQuadric::new(e, k as i16))
-            .collect()
+/// Label of each segment's pixels: its index.
+const SEGMENT_LABELS: [i16; crate::body::NUM_SEGMENTS] = {
+    let mut ids = [0i16; crate::body::NUM_SEGMENTS];
+    let mut k = 0;
+    while k < ids.len() {
+        ids[k] = k as i16;
+        k += 1;
     }
+    ids
+};
 
+impl BodyModel {
     /// Renders the posed body into caller buffers (H×W row-major): depth z in metres
     /// (0 = background) and the segment label of each pixel (−1 = background).
     pub fn render_depth_into(
@@ -210,10 +217,8 @@ impl BodyModel {
         depth: &mut [f32],
         labels: &mut [i16],
     ) -> Result<()> {
-        let kin = Kinematics::new(self, pose);
-        let placed = self.placed_ellipsoids(&kin);
-        let ids: [i16; crate::body::NUM_SEGMENTS] = std::array::from_fn(|k| k as i16);
-        render_ellipsoids_into(&placed, &ids, camera, depth, labels)
+        let placed = self.placed_ellipsoids(&Kinematics::new(self, pose));
+        render_ellipsoids_into(&placed, &SEGMENT_LABELS, camera, depth, labels)
     }
 
     /// Renders the posed body: (depth H×W metres, labels H×W).
@@ -232,23 +237,51 @@ impl BodyModel {
 /// rendered pixel outside `mask`, costs `cap`. The sum over `cap` × the observed pixel
 /// count (observed = in `mask` with a finite depth > 0); infinite when none is.
 pub fn depth_discrepancy(rendered: &[f32], depth: &[f32], mask: &[bool], cap: f64) -> f64 {
-    let (mut diff, mut penalties, mut observed) = (0.0f64, 0usize, 0usize);
+    let (mut sum, mut n_observed) = (Mismatch::default(), 0);
     for ((&r, &d), &m) in rendered.iter().zip(depth).zip(mask) {
-        let obs = m && d.is_finite() && d > 0.0;
+        sum.add(r, d, m, cap);
+        n_observed += observed(d, m) as usize;
+    }
+    sum.score(cap, n_observed)
+}
+
+/// An observed pixel: in the mask, with a finite depth > 0.
+#[inline]
+fn observed(depth: f32, in_mask: bool) -> bool {
+    in_mask && depth.is_finite() && depth > 0.0
+}
+
+/// The running sums of [`depth_discrepancy`].
+#[derive(Debug, Default, Clone, Copy)]
+struct Mismatch {
+    /// Σ capped depth differences where both have depth.
+    diff: f64,
+    /// Pixels costing `cap`.
+    penalties: usize,
+}
+
+impl Mismatch {
+    /// Adds pixel (rendered `r`, observed `d`, in the mask `m`).
+    #[inline]
+    fn add(&mut self, r: f32, d: f32, m: bool, cap: f64) {
+        let obs = observed(d, m);
         let ren = r.is_finite() && r > 0.0;
-        observed += obs as usize;
         if obs && ren {
-            diff += ((r - d).abs() as f64).min(cap);
+            self.diff += ((r - d).abs() as f64).min(cap);
         } else if obs || (ren && !m) {
             // Observed but not rendered, or rendered outside the foreground (a hole
             // inside the mask is neither).
-            penalties += 1;
+            self.penalties += 1;
         }
     }
-    if observed == 0 {
-        return f64::INFINITY;
+
+    /// The discrepancy for `observed` observed pixels (infinite when none is).
+    fn score(&self, cap: f64, observed: usize) -> f64 {
+        if observed == 0 {
+            return f64::INFINITY;
+        }
+        (self.diff + cap * self.penalties as f64) / (cap * observed as f64)
     }
-    (diff + cap * penalties as f64) / (cap * observed as f64)
 }
 
 impl BodyModel {
@@ -290,17 +323,17 @@ impl BodyModel {
             .chunks(w)
             .zip(mask.chunks(w))
             .map(|(d, m)| {
-                let obs = |c: &usize| m[*c] && d[*c].is_finite() && d[*c] > 0.0;
+                let obs = |c: &usize| observed(d[*c], m[*c]);
                 let lo = (0..w).find(obs)?;
                 Some((lo, (0..w).rfind(obs).unwrap_or(lo)))
             })
             .collect();
-        let observed: usize = depth
+        let n_observed = depth
             .iter()
             .zip(mask)
-            .filter(|(&d, &m)| m && d.is_finite() && d > 0.0)
+            .filter(|(&d, &m)| observed(d, m))
             .count();
-        if observed == 0 {
+        if n_observed == 0 {
             return Ok(vec![f64::INFINITY; poses.len()]);
         }
         poses
@@ -308,8 +341,9 @@ impl BodyModel {
             .map_init(
                 || (vec![0.0f32; w], vec![BACKGROUND_LABEL; w]),
                 |(rendered, labels), pose| {
-                    let quadrics = self.ray_quadrics(pose);
-                    let (mut diff, mut penalties) = (0.0f64, 0usize);
+                    let placed = self.placed_ellipsoids(&Kinematics::new(self, pose));
+                    let quadrics = ray_quadrics(&placed, &SEGMENT_LABELS);
+                    let mut sum = Mismatch::default();
                     for (v, &observed_cols) in observed_cols.iter().enumerate() {
                         let drawn = render_row_spans(&quadrics, camera, v as f64, rendered, labels);
                         let Some((lo, hi)) = union(drawn, observed_cols) else {
@@ -317,20 +351,13 @@ impl BodyModel {
                         };
                         let row = v * w;
                         for col in lo..=hi {
-                            let (r, d, m) = (rendered[col], depth[row + col], mask[row + col]);
-                            let obs = m && d.is_finite() && d > 0.0;
-                            let ren = r.is_finite() && r > 0.0;
-                            if obs && ren {
-                                diff += ((r - d).abs() as f64).min(cap);
-                            } else if obs || (ren && !m) {
-                                penalties += 1;
-                            }
+                            sum.add(rendered[col], depth[row + col], mask[row + col], cap);
                         }
                         if let Some((lo, hi)) = drawn {
                             rendered[lo..=hi].fill(0.0);
                         }
                     }
-                    Ok((diff + cap * penalties as f64) / (cap * observed as f64))
+                    Ok(sum.score(cap, n_observed))
                 },
             )
             .collect()
