@@ -41,6 +41,32 @@ pub fn to_f64<'a>(pts: &[[f32; 3]], buf: &'a mut [[f64; 3]]) -> &'a [[f64; 3]] {
     &buf[..pts.len()]
 }
 
+/// Counting sort by segment: the indices of the points whose label is a segment
+/// (labels outside 0..[`NUM_SEGMENTS`] are skipped) grouped by segment, ascending within
+/// each, written to the front of `order` (which must hold `labels.len()` entries).
+/// Returns where each segment's run starts: segment k's points are
+/// `order[start[k]..start[k + 1]]`.
+pub fn group_by_segment(labels: &[i32], order: &mut [u32]) -> [usize; NUM_SEGMENTS + 1] {
+    let segment = |l: i32| (l >= 0 && (l as usize) < NUM_SEGMENTS).then_some(l as usize);
+    let mut start = [0usize; NUM_SEGMENTS + 1];
+    for k in labels.iter().filter_map(|&l| segment(l)) {
+        start[k + 1] += 1;
+    }
+    for k in 0..NUM_SEGMENTS {
+        start[k + 1] += start[k];
+    }
+    let mut next = start;
+    for (i, k) in labels
+        .iter()
+        .enumerate()
+        .filter_map(|(i, &l)| Some((i, segment(l)?)))
+    {
+        order[next[k]] = i as u32;
+        next[k] += 1;
+    }
+    start
+}
+
 #[inline]
 fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
@@ -283,21 +309,10 @@ impl BodyModel {
             .for_each(|((res, jac), (pts, labs))| {
                 res.fill(0.0);
                 jac.fill(0.0);
-                // The chunk's labelled points grouped by segment (counting sort), so
-                // each segment's distances go through the lockstep root-finder.
-                let mut start = [0usize; NUM_SEGMENTS + 1];
-                for &l in labs.iter().filter(|&&l| l >= 0) {
-                    start[l as usize + 1] += 1;
-                }
-                for k in 0..NUM_SEGMENTS {
-                    start[k + 1] += start[k];
-                }
-                let mut order = [0u16; CHUNK_POINTS];
-                let mut next = start;
-                for (i, &l) in labs.iter().enumerate().filter(|(_, &l)| l >= 0) {
-                    order[next[l as usize]] = i as u16;
-                    next[l as usize] += 1;
-                }
+                // The chunk's labelled points grouped by segment, so each segment's
+                // distances go through the lockstep root-finder.
+                let mut order = [0u32; CHUNK_POINTS];
+                let start = group_by_segment(labs, &mut order);
                 let vec3 = |i: usize| [pts[i][0] as f64, pts[i][1] as f64, pts[i][2] as f64];
                 for (k, e) in geo.segments.iter().enumerate() {
                     let run = &order[start[k]..start[k + 1]];

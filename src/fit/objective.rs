@@ -10,7 +10,7 @@
 //! have grown to the cloud size.
 
 use super::lm::{PoseObjective, N, NN};
-use crate::body::residuals::{PoseGeometry, MAX_SEGMENT_DOFS};
+use crate::body::residuals::{group_by_segment, PoseGeometry, MAX_SEGMENT_DOFS};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use rayon::prelude::*;
 
@@ -184,28 +184,13 @@ impl<'a> PointObjective<'a> {
     /// loop calls this once per M-step instead of building a new objective.
     pub fn relabel(&mut self, labels: &[i32], point_cost: PointCost) {
         debug_assert_eq!(self.points.len(), labels.len());
-        let segment = |l: i32| (l >= 0 && (l as usize) < NUM_SEGMENTS).then_some(l as usize);
-        // Counting sort of the labelled points by segment.
-        let mut start = [0usize; NUM_SEGMENTS + 1];
-        for &l in labels {
-            if let Some(k) = segment(l) {
-                start[k + 1] += 1;
-            }
-        }
-        for k in 0..NUM_SEGMENTS {
-            start[k + 1] += start[k];
-        }
+        self.order.resize(labels.len(), 0);
+        let start = group_by_segment(labels, &mut self.order);
         let m = start[NUM_SEGMENTS];
+        self.order.truncate(m);
         self.segment.clear();
         for k in 0..NUM_SEGMENTS {
             self.segment.resize(start[k + 1], k as u8);
-        }
-        self.order.resize(m, 0);
-        for (i, &l) in labels.iter().enumerate() {
-            if let Some(k) = segment(l) {
-                self.order[start[k]] = i as u32;
-                start[k] += 1;
-            }
         }
         let n_chunks = m.div_ceil(CHUNK_POINTS);
         self.distance.resize(m, 0.0);
