@@ -10,7 +10,7 @@
 //! have grown to the cloud size.
 
 use super::lm::{PoseObjective, N, NN};
-use crate::body::residuals::{group_by_segment, PoseGeometry, MAX_SEGMENT_DOFS};
+use crate::body::residuals::{cross, group_by_segment, PoseGeometry, MAX_SEGMENT_DOFS};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use rayon::prelude::*;
 
@@ -295,14 +295,8 @@ impl PoseObjective for PointObjective<'_> {
                         }
                         let p = vec3(&points[idx[r] as usize]);
                         let n = &normal[r];
-                        let q = [
-                            n[0],
-                            n[1],
-                            n[2],
-                            p[1] * n[2] - p[2] * n[1],
-                            p[2] * n[0] - p[0] * n[2],
-                            p[0] * n[1] - p[1] * n[0],
-                        ];
+                        let m = cross(&p, n);
+                        let q = [n[0], n[1], n[2], m[0], m[1], m[2]];
                         let mut e = 0;
                         for a in 0..6 {
                             let wq = w * q[a];
