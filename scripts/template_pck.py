@@ -21,6 +21,7 @@ from pathlib import Path
 import depthpose as dp
 import numpy as np
 from depthpose.metrics import evaluate
+from depthpose.sequence import open_sequence
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_DATA = ROOT.parent / "shared" / "data" / "synth"
@@ -28,26 +29,20 @@ DEFAULT_DATA = ROOT.parent / "shared" / "data" / "synth"
 
 def sequence_pck(path: Path, db: dp.TemplateDatabase, top_k: int) -> tuple[int, float, float]:
     """(frames, PCK of the top-1 candidate, PCK of the best of the top-k)."""
-    d = np.load(path)
-    fx, fy, cx, cy = (float(v) for v in d["intrinsics"])
-    depth = d["depth"]
-    h, w = depth.shape[1:]
-    cam = dp.Camera(fx, fy, cx, cy, w, h)
-    scale = 1000.0 if depth.dtype == np.uint16 else 1.0
+    seq = open_sequence(path)
+    with np.load(path) as d:
+        masks = d["mask"]
     top1, best = [], []
-    for t in range(len(depth)):
-        frame = depth[t].astype(np.float32) / np.float32(scale)
-        cands = db.match(frame, cam, mask=d["mask"][t], top_k=top_k)
-        gt = d["joints"][t]
+    for frame, mask, gt in zip(seq.frames(), masks, seq.gt_joints, strict=True):
+        cands = db.match(frame, seq.camera, mask=mask, top_k=top_k)
         joints = [np.asarray(c.joints, np.float64) for c in cands]
         hits = [(np.linalg.norm(j - gt, axis=1) <= 0.10).sum() for j in joints]
         top1.append(joints[0])
         best.append(joints[int(np.argmax(hits))])
-    gt_all = d["joints"]
     return (
-        len(depth),
-        evaluate(np.asarray(top1), gt_all)["pck"],
-        evaluate(np.asarray(best), gt_all)["pck"],
+        seq.n_frames,
+        evaluate(np.asarray(top1), seq.gt_joints)["pck"],
+        evaluate(np.asarray(best), seq.gt_joints)["pck"],
     )
 
 
