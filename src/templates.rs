@@ -1185,11 +1185,11 @@ avx2_dispatch! {
     ///
     /// Exact, but pruned. Per representative, vectorised passes over all template samples
     /// give each pair a lower bound of its cost: the position term plus the bound of the
-    /// descriptor distance from the short descriptions ([`PruneIndex`]). The pair of least
-    /// bound is costed in full first, then only the pairs whose bounds are below the best
-    /// cost so far: on the default database about 4 template samples in 100 are read in
-    /// full (about 7 in 100 with 24 directions in index order, 85 in 100 by the position
-    /// term alone).
+    /// descriptor distance from the short descriptions ([`PruneIndex`]). Four pairs of
+    /// low bound (the least among them) are costed in full first, then only the pairs
+    /// whose bounds are below the best cost so far, four at a time: on the default
+    /// database about 4 template samples in 100 have a bound below the best (about 7 in
+    /// 100 with 24 directions in index order, 85 in 100 by the position term alone).
     /// `t_projected` is the template's component-major description; `scratch` is reused
     /// storage.
     fn prune_sum(
