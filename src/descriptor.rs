@@ -327,13 +327,9 @@ pub fn surface_context_from_points(
 
     let dim = config.dim();
     let mut descriptors = vec![0.0f32; n * dim];
-    let (nr, na) = (config.radial_bins, config.angular_bins);
-    let inner = (config.inner_radius * scale) as f32;
-    let outer = (config.outer_radius * scale) as f32;
-    let outer2 = outer * outer;
-    let log_inner = inner.ln();
-    let radial_per_log = nr as f32 / (outer / inner).ln();
-    let angular_per_rad = na as f32 / std::f32::consts::TAU;
+    let bins = LogPolarBins::new(config, scale);
+    let outer2 = bins.outer2;
+    let na = config.angular_bins;
     descriptors
         .par_chunks_mut(dim)
         .zip(samples.par_iter())
@@ -344,10 +340,7 @@ pub fn surface_context_from_points(
                 if r2 >= outer2 {
                     continue;
                 }
-                let rb = ((0.5 * r2.ln() - log_inner) * radial_per_log).max(0.0) as usize;
-                let theta = dv.atan2(du) + std::f32::consts::PI;
-                let ab = ((theta * angular_per_rad) as usize) % na;
-                let k = 3 * (rb.min(nr - 1) * na + ab);
+                let k = 3 * (bins.ring(r2) * na + bins.sector(du, dv));
                 desc[k] += c[2];
                 desc[k + 1] += c[3];
                 desc[k + 2] += c[4];
@@ -371,6 +364,81 @@ pub fn surface_context_from_points(
         centroid,
         points: m,
     })
+}
+
+/// The log-polar bins around a sample, found by comparisons instead of a logarithm
+/// and an arc tangent per pixel cell (those were a quarter of a frame's descriptor
+/// time).
+///
+/// Ring r holds the offsets of length in [inner·q^r, inner·q^(r+1)), q = (outer /
+/// inner)^(1/rings), the first ring also everything nearer, the last everything
+/// farther (up to `outer`, beyond which nothing counts): the ring is the number of
+/// inner edges at or below the squared length. Sector a holds the directions whose
+/// angle atan2(dv, du) lies in [−π + aΔ, −π + (a+1)Δ), Δ = 2π / sectors, angle π
+/// (and the zero offset's 0) included as atan2 gives them: the sector is the number of
+/// sector edges (inside (−π, π)) at or below the angle, counted with cross products
+/// against the edges' unit vectors in the offset's half plane, where they order like
+/// the angles. Up to rounding at the edges, the same bins as the formulas
+/// `⌊(ln r − ln inner)·rings / ln(outer / inner)⌋` and `⌊(atan2 + π) / Δ⌋`
+/// (`log_polar_bins_equal_the_formulas`).
+struct LogPolarBins {
+    /// Squared inner edges of rings 1..rings, ascending.
+    ring_edges2: Vec<f32>,
+    /// Squared outer radius.
+    outer2: f32,
+    /// Unit vectors of the sector edges with angle in (−π, 0] and in (0, π), ascending.
+    lower_edges: Vec<[f32; 2]>,
+    upper_edges: Vec<[f32; 2]>,
+}
+
+impl LogPolarBins {
+    fn new(config: &DescriptorConfig, scale: f64) -> Self {
+        let (nr, na) = (config.radial_bins, config.angular_bins);
+        let (inner, outer) = (config.inner_radius * scale, config.outer_radius * scale);
+        let ring_edges2 = (1..nr)
+            .map(|r| {
+                let edge = inner * (outer / inner).powf(r as f64 / nr as f64);
+                (edge * edge) as f32
+            })
+            .collect();
+        let (mut lower_edges, mut upper_edges) = (Vec::new(), Vec::new());
+        for a in 1..na {
+            let angle = -std::f64::consts::PI + a as f64 * std::f64::consts::TAU / na as f64;
+            let unit = [angle.cos() as f32, angle.sin() as f32];
+            if angle <= 0.0 {
+                lower_edges.push(unit);
+            } else {
+                upper_edges.push(unit);
+            }
+        }
+        let outer = outer as f32;
+        LogPolarBins {
+            ring_edges2,
+            outer2: outer * outer,
+            lower_edges,
+            upper_edges,
+        }
+    }
+
+    /// Ring of an offset of squared length `r2` (< `outer2`).
+    #[inline]
+    fn ring(&self, r2: f32) -> usize {
+        self.ring_edges2.iter().filter(|&&e| r2 >= e).count()
+    }
+
+    /// Sector of the offset (du, dv).
+    #[inline]
+    fn sector(&self, du: f32, dv: f32) -> usize {
+        // At or below the edge's angle ⇔ the edge turns counter-clockwise onto the offset.
+        let at_or_after = |e: &&[f32; 2]| e[0] * dv - e[1] * du >= 0.0;
+        if dv > 0.0 {
+            self.lower_edges.len() + self.upper_edges.iter().filter(at_or_after).count()
+        } else if dv == 0.0 && du < 0.0 {
+            0 // angle ±π: the first sector, as ⌊2π / Δ⌋ mod sectors gives
+        } else {
+            self.lower_edges.iter().filter(at_or_after).count()
+        }
+    }
 }
 
 /// The rotation taking the unit line of sight `dir` to +z (the shortest arc).
@@ -709,6 +777,64 @@ mod tests {
                 .sum();
             assert!((squared_distance(&a, &b) as f64 - want).abs() < 1e-4 * (1.0 + want));
         }
+    }
+
+    /// The comparison bins against the logarithm and arc-tangent formulas, on offsets
+    /// spread over the disc (and on the axes and the zero offset): equal wherever the
+    /// offset is not within rounding of a bin edge.
+    #[test]
+    fn log_polar_bins_equal_the_formulas() {
+        let config = DescriptorConfig::default();
+        let scale = 37.5;
+        let bins = LogPolarBins::new(&config, scale);
+        let (nr, na) = (config.radial_bins, config.angular_bins);
+        let inner = (config.inner_radius * scale) as f32;
+        let outer = (config.outer_radius * scale) as f32;
+        let mut s = 3u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+        };
+        let mut offsets: Vec<(f32, f32)> = (0..20_000)
+            .map(|_| (outer * next(), outer * next()))
+            .collect();
+        offsets.extend([
+            (0.0, 0.0),
+            (3.0, 0.0),
+            (-3.0, 0.0),
+            (0.0, 3.0),
+            (0.0, -3.0),
+            (-3.0, -0.0),
+        ]);
+        let (mut checked, mut near_edge) = (0, 0);
+        for (du, dv) in offsets {
+            let r2 = du * du + dv * dv;
+            if r2 >= bins.outer2 {
+                continue;
+            }
+            let ring = (((0.5 * r2.ln() - inner.ln()) * nr as f32 / (outer / inner).ln()).max(0.0)
+                as usize)
+                .min(nr - 1);
+            let theta = dv.atan2(du) + std::f32::consts::PI;
+            let sector = ((theta * na as f32 / std::f32::consts::TAU) as usize) % na;
+            // Within rounding of an edge, either bin is right.
+            let ring_pos = (0.5 * r2.ln() - inner.ln()) * nr as f32 / (outer / inner).ln();
+            let sector_pos = theta * na as f32 / std::f32::consts::TAU;
+            let near = |x: f32| (x - x.round()).abs() < 1e-4;
+            if (near(ring_pos) && ring_pos > 0.5) || (near(sector_pos) && r2 > 0.0) {
+                near_edge += 1;
+                continue;
+            }
+            assert_eq!(bins.ring(r2), ring, "ring of ({du}, {dv})");
+            assert_eq!(bins.sector(du, dv), sector, "sector of ({du}, {dv})");
+            checked += 1;
+        }
+        assert!(
+            checked > 10_000 && near_edge < 50,
+            "{checked} checked, {near_edge} near an edge"
+        );
     }
 
     #[test]

@@ -28,7 +28,7 @@ use rayon::prelude::*;
 
 /// Version of the template file format and of the template definition; bump when
 /// either changes so stale caches are rebuilt.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 /// Poses per limb and view directions.
 pub const LIMB_POSES: usize = 4;
