@@ -6,10 +6,12 @@
 //! ≥ 0` that relaxes every column from each row it reaches (a branch-free scan that
 //! vectorises; settled columns hold NaN and drop out of every comparison), breaks ties
 //! toward a free column (which ends the search) and updates the potentials once per
-//! row. The whole solve is O(n²·m) for n ≤ m rows. (Jonker and Volgenant's column
-//! reduction and augmenting row reduction, tried as a start, made the matching costs'
-//! solves slower, not faster: they are cheap to search once the scan vectorises.) Outliers are handled by
+//! row. The whole solve is O(n²·m) for n ≤ m rows. Outliers are handled by
 //! [`assignment_with_outliers`]: every item may stay unmatched at a fixed dummy cost.
+//!
+//! Jonker and Volgenant's column reduction and augmenting row reduction, tried as a
+//! start (sessions 8 and 12), made the matcher's solves slower, not faster, once the
+//! scan vectorised.
 
 use crate::error::{ensure, Result};
 
@@ -20,7 +22,7 @@ pub struct AssignmentWorkspace {
     u: Vec<f64>,
     v: Vec<f64>,
     /// Per column, in the current search: length of the shortest alternating path
-    /// found to it, and the row it was reached from.
+    /// found to it (NaN once settled, see `settled`), and the row it was reached from.
     shortest: Vec<f64>,
     path: Vec<usize>,
     /// The current assignment both ways ([`NONE`] where free).
