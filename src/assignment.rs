@@ -83,7 +83,7 @@ pub fn solve_assignment_into(
     ws.path.resize(cols, NONE);
     ws.row_seen.resize(rows, false);
     ws.col_seen.resize(cols, false);
-    augment_free_rows(cost, rows, cols, ws);
+    assign_rows(cost, rows, cols, ws);
     row_to_col.extend_from_slice(&ws.row_col);
     Ok(row_to_col
         .iter()
@@ -203,12 +203,12 @@ unsafe fn relax_row_avx2(
 /// column's distance moves to `settled`. The next column to settle is one of least
 /// distance: a free one among equals if there is one (it ends the search; looked for
 /// among the free columns only when the first such column is taken), else the first.
-fn augment_free_rows(cost: &[f64], rows: usize, cols: usize, ws: &mut AssignmentWorkspace) {
+fn assign_rows(cost: &[f64], rows: usize, cols: usize, ws: &mut AssignmentWorkspace) {
     ws.settled.clear();
     ws.settled.resize(cols, 0.0);
+    // Nothing is assigned yet: every column starts free.
     ws.free_cols.clear();
-    ws.free_cols
-        .extend((0..cols).filter(|&j| ws.col_row[j] == NONE));
+    ws.free_cols.extend(0..cols);
     for start in 0..rows {
         ws.shortest.fill(f64::INFINITY);
         ws.row_seen.fill(false);

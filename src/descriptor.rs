@@ -597,7 +597,7 @@ pub fn squared_distances_x4(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-pub(crate) unsafe fn squared_distances_x4_avx2(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
+unsafe fn squared_distances_x4_avx2(a: &[f32], b: [&[f32]; 4]) -> [f32; 4] {
     use std::arch::x86_64::*;
     let full = a.len() / LANES * LANES;
     let mut acc = [_mm256_setzero_ps(); 4];
