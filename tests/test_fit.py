@@ -75,6 +75,19 @@ def test_brief_strided_fit_labels_only_its_own_pixels():
     assert sum(brief.part_counts.values()) + brief.outliers == int(sub.sum())
     hit = brief.labels >= 0
     assert (brief.labels[hit] == parts[hit]).mean() > 0.9
+    # Labelled at every pixel afterwards: the full fit's labels, energy and counts.
+    done = dp.fit.label_all_pixels(depth, CAM, brief, model=model, config={"stride": 2})
+    np.testing.assert_array_equal(done.labels, full.labels)
+    np.testing.assert_array_equal(done.pose, full.pose)
+    assert done.energy == full.energy and done.part_counts == full.part_counts
+    assert done.outliers == full.outliers and done.iterations == full.iterations
+    again = dp.fit.label_all_pixels(depth, CAM, done, model=model, config={"stride": 2})
+    np.testing.assert_array_equal(again.labels, full.labels)
+    # A result of another image size is rejected, naming it.
+    half = CAM.scaled(0.5)
+    small, _ = model.render_depth(truth, half)
+    with pytest.raises(dp.DepthPoseError, match="resume"):
+        dp.fit.label_all_pixels(small, half, brief, model=model, config={"stride": 2})
 
 
 def test_fit_on_a_stride_two_grid_labels_every_pixel():

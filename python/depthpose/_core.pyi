@@ -395,6 +395,17 @@ def fit_poses(
     prior_weight: float = 100.0,
     resume: list[FitResult] | None = None,
 ) -> list[FitResult]: ...
+def label_all_pixels(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    result: FitResult,
+    *,
+    model: BodyModel | None = None,
+    mask: npt.NDArray[np.bool_] | None = None,
+    config: FitConfig | None = None,
+    prior: npt.NDArray[np.float64] | None = None,
+    prior_weight: float = 100.0,
+) -> FitResult: ...
 def pose_from_joints(
     joints: npt.NDArray[np.float64],
     model: BodyModel | None = None,

@@ -1,7 +1,8 @@
 """Model fitting: CRF body-part labelling + Levenberg-Marquardt in a hard EM loop.
 
 `fit_pose` fits the body model to the foreground of a depth image from an initial pose
-(`fit_poses` from several start poses at once, in parallel);
+(`fit_poses` from several start poses at once, in parallel; `label_all_pixels` labels
+every pixel of a strided fit that kept only its EM's labels);
 `pose_from_joints` is inverse kinematics (the pose whose 15 joints best match given
 joint positions, NaN rows skipped). Both default to `BodyModel()` (1.75 m reference
 proportions). `fit_shape` calibrates the body shape (12 symmetric scale factors of
@@ -19,6 +20,7 @@ import numpy as np
 from depthpose._core import BodyModel, Camera, FitConfig, FitResult, ShapeFitResult
 from depthpose._core import fit_pose as _fit_pose
 from depthpose._core import fit_poses as _fit_poses
+from depthpose._core import label_all_pixels as _label_all_pixels
 from depthpose._core import pose_from_joints as _pose_from_joints
 
 __all__ = [
@@ -28,6 +30,7 @@ __all__ = [
     "fit_pose",
     "fit_poses",
     "fit_shape",
+    "label_all_pixels",
     "pose_from_joints",
 ]
 
@@ -109,6 +112,38 @@ def fit_poses(
         prior=None if prior is None else np.asarray(prior),
         prior_weight=prior_weight,
         resume=None if resume is None else list(resume),
+    )
+
+
+def label_all_pixels(
+    depth: np.ndarray,
+    camera: Camera,
+    result: FitResult,
+    *,
+    model: BodyModel | None = None,
+    mask: np.ndarray | None = None,
+    config: None | FitConfig | Mapping[str, Any] = None,
+    prior: np.ndarray | None = None,
+    prior_weight: float = 100.0,
+) -> FitResult:
+    """`result` labelled at every pixel of `depth`.
+
+    For a fit with a `stride` and `label_all_pixels=False` in its config (its labels
+    are the EM's, at every `stride`-th pixel only), e.g. the best of several candidate
+    fits: one E-step at its pose from those labels, exactly what the same fit with
+    `label_all_pixels=True` returns. Pass the fit's own `depth`, `mask`, `model`,
+    `config` and `prior`. A result already labelled at every pixel, or a config without
+    a stride, comes back unchanged.
+    """
+    return _label_all_pixels(
+        depth,
+        camera,
+        result,
+        model=model,
+        mask=mask,
+        config=_config(config),
+        prior=None if prior is None else np.asarray(prior),
+        prior_weight=prior_weight,
     )
 
 

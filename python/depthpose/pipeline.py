@@ -449,13 +449,14 @@ class PoseEstimator:
                 out.append(q)
         return out
 
-    def search(self, depth, mask, *, extra=(), timings=None, hypotheses=None):
+    def search(self, depth, mask, *, extra=(), timings=None, hypotheses=None, label=True):
         """Best fit from the template hypotheses (and ``extra`` start poses, always
         refined): all ranked by their depth discrepancy, the best ``hypotheses`` (default
         ``config.hypotheses``) refined
         briefly by EM (in parallel), the ``finals`` explaining the depth best refined
         fully (their EM continued, in parallel), the best of all kept. Returns the fit and
-        its discrepancy."""
+        its discrepancy. ``label=False``: a final comes back with the labels of its EM
+        only (at every ``final_stride``-th pixel); :meth:`label_all` completes it."""
         starts = self.hypotheses(depth, mask)
         if timings is not None:
             timings["templates"] = time.perf_counter()
@@ -479,19 +480,33 @@ class PoseEstimator:
         # The best candidates' EM goes on where their brief fits stopped (same labels,
         # the outlier distance still annealing) rather than starting over.
         winners = [fits[i] for i in order]
+        # The finals are ranked by pose too: only the one kept is labelled at every pixel.
         finals = self._fits(
             depth,
             mask,
             [f.pose for f in winners],
             resume=winners,
             stride=self.config.final_stride,
+            brief=True,
         )
         final_scores = self.discrepancies([f.pose for f in finals], depth, mask)
         k = int(np.argmin(final_scores))
         # (A brief candidate's labels cover only its own pixels: a final is kept then.)
         if brief or final_scores[k] <= best_score:
             best, best_score = finals[k], float(final_scores[k])
+            if label:
+                best = self.label_all(depth, mask, best)
         return best, best_score
+
+    def label_all(self, depth, mask, fit):
+        """``fit``, a final of :meth:`search` (at ``final_stride``), labelled at every
+        pixel: what the fit itself would have returned with ``label_all_pixels``."""
+        from .fit import label_all_pixels
+
+        config = self._fit_config(None, self.config.final_stride)
+        if not config.label_all_pixels:
+            return fit
+        return label_all_pixels(depth, self.camera, fit, model=self.model, mask=mask, config=config)
 
     def estimate(self, depth: np.ndarray, mask: np.ndarray | None = None) -> PoseResult:
         """Foreground → template search (with swapped and mirrored hypotheses) → EM
@@ -725,9 +740,12 @@ class PoseTracker:
                     m,
                     extra=[pose, swap_limbs(pose)],
                     hypotheses=cfg.lost_hypotheses if lost else cfg.recheck_hypotheses,
+                    label=False,
                 )
-                t2["search"] = time.perf_counter()
                 margin = 0.0 if lost else cfg.switch_margin
+                if best_score < score * (1.0 - margin):
+                    best = est.label_all(depth, m, best)
+                t2["search"] = time.perf_counter()
                 if best_score < score * (1.0 - margin):
                     timings = res.timings
                     timings["search"] = _stage_times(t2)["total"]

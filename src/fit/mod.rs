@@ -315,6 +315,62 @@ impl FitProblem {
             }
             return Ok(FitResult::from_em(model, em, labels));
         }
+        self.label_every_pixel(model, em, prior)
+    }
+
+    /// `result`, a fit of this image at this problem's stride that kept the EM's
+    /// labels only (`label_all_pixels` off, e.g. the best of several candidate fits),
+    /// labelled at every pixel: the same result as that fit with `label_all_pixels` on.
+    /// A result already labelled at every pixel, or a problem without a stride, gives
+    /// `result` unchanged. (`prior`: the fit's prior, for the energy.)
+    pub fn label_all(
+        &self,
+        model: &BodyModel,
+        result: &FitResult,
+        prior: Option<&PosePrior>,
+    ) -> Result<FitResult> {
+        if self.sub.is_none() {
+            return Ok(result.clone());
+        }
+        let labels = self.resume_labels(result)?;
+        // Labels off the sub-sampled pixels (s·r, s·c): labelled at every pixel already.
+        let (w, s) = (self.camera.width, self.config.stride);
+        let off_grid = |px: usize| !(px / w).is_multiple_of(s) || !(px % w).is_multiple_of(s);
+        if result
+            .labels
+            .iter()
+            .enumerate()
+            .any(|(px, &l)| l >= 0 && off_grid(px))
+        {
+            return Ok(result.clone());
+        }
+        let em = EmResult {
+            pose: result.pose,
+            labels,
+            energy: result.energy,
+            energy_trace: result.energy_trace.clone(),
+            iterations: result.iterations,
+            termination: result.termination,
+            part_counts: result.part_counts,
+            outliers: result.outliers,
+        };
+        self.label_every_pixel(model, em, prior)
+    }
+
+    /// The end of a strided fit with `label_all_pixels`: the EM's result `em` on the
+    /// sub-sampled cloud, labelled at every full-resolution pixel.
+    fn label_every_pixel(
+        &self,
+        model: &BodyModel,
+        em: EmResult,
+        prior: Option<&PosePrior>,
+    ) -> Result<FitResult> {
+        let (cloud, graph, config) = (&self.cloud, &self.graph, &self.config);
+        let Some((sub_cloud, sub_cam, _)) = &self.sub else {
+            let labels = label_image(cloud, &em.labels);
+            return Ok(FitResult::from_em(model, em, labels));
+        };
+        let s = config.stride;
         // Then every full-resolution pixel: starting from the label of its sub-sampled
         // pixel (the one at the top-left of its s×s block) or, without one (no reading
         // there), the outlier label, one E-step for the final pose at the final outlier

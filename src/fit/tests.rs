@@ -277,6 +277,11 @@ fn strided_fit_without_full_labels_keeps_its_em() {
         b.labels.iter().filter(|&&l| l >= 0).count(),
         n_sub - b.outliers
     );
+    // Labelled at every pixel afterwards: exactly the fit that labelled them itself; a
+    // result labelled already comes back as it is.
+    let labelled = problem.label_all(&model, &b, None).unwrap();
+    assert_eq!(labelled, a);
+    assert_eq!(problem.label_all(&model, &a, None).unwrap(), a);
     // Continued at stride 2 (labelling every pixel at the end), from either result.
     let more = FitConfig {
         em: EmConfig {

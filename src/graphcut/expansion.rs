@@ -132,7 +132,12 @@ struct Checked<'a, C: Cost> {
     allowed_somewhere: Vec<bool>,
 }
 
-fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Result<Checked<'a, C>> {
+/// Checks `p` (`edges_checked`: its edges are known to be in range for its nodes).
+fn check_problem<'a, C: Cost>(
+    p: &CrfProblem<'a, C>,
+    need_metric: bool,
+    edges_checked: bool,
+) -> Result<Checked<'a, C>> {
     let l = p.n_labels;
     ensure(l >= 1, "unary", || "needs at least one label".into())?;
     ensure(l <= i32::MAX as usize, "unary", || "too many labels".into())?;
@@ -150,10 +155,18 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
     ensure(n <= super::maxflow::MAX_NODES, "unary", || {
         "too many nodes".into()
     })?;
-    if let Some(k) = p
-        .unary
-        .iter()
-        .position(|&u| !(u.is_finite_value() || u == C::FORBIDDEN))
+    // One branch-free (vectorised) pass settles the common case: every cost finite and
+    // none forbidden. Only otherwise are the costs searched for the bad or forbidden.
+    let plain = p.unary.iter().fold(true, |ok, &u| {
+        ok & u.is_finite_value() & (u != C::FORBIDDEN)
+    });
+    if let Some(k) = (!plain)
+        .then(|| {
+            p.unary
+                .iter()
+                .position(|&u| !(u.is_finite_value() || u == C::FORBIDDEN))
+        })
+        .flatten()
     {
         return Err(Error::invalid(
             "unary",
@@ -172,10 +185,13 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
             p.edges.len()
         )
     })?;
-    if let Some(k) = p
-        .edges
-        .iter()
-        .position(|e| e[0] as usize >= n || e[1] as usize >= n)
+    if let Some(k) = (!edges_checked)
+        .then(|| {
+            p.edges
+                .iter()
+                .position(|e| e[0] as usize >= n || e[1] as usize >= n)
+        })
+        .flatten()
     {
         return Err(Error::invalid(
             "edges",
@@ -185,10 +201,17 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
             ),
         ));
     }
-    if let Some(k) = p
+    let weights_ok = p
         .weights
         .iter()
-        .position(|&w| !(w.is_finite_value() && w >= C::ZERO))
+        .fold(true, |ok, &w| ok & w.is_finite_value() & (w >= C::ZERO));
+    if let Some(k) = (!weights_ok)
+        .then(|| {
+            p.weights
+                .iter()
+                .position(|&w| !(w.is_finite_value() && w >= C::ZERO))
+        })
+        .flatten()
     {
         return Err(Error::invalid(
             "weights",
@@ -213,9 +236,10 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
             v.to_vec()
         }
     };
-    // Every node needs an allowed label.
-    let mut allowed_somewhere = vec![false; l];
-    for i in 0..n {
+    // Every node needs an allowed label (without forbidden costs, all are allowed).
+    let mut allowed_somewhere = vec![plain; l];
+    let rows_to_check = if plain { 0 } else { n };
+    for i in 0..rows_to_check {
         let row = &p.unary[i * l..(i + 1) * l];
         let mut any = false;
         for (a, &u) in row.iter().enumerate() {
@@ -231,7 +255,11 @@ fn check_problem<'a, C: Cost>(p: &CrfProblem<'a, C>, need_metric: bool) -> Resul
             ));
         }
     }
-    let big = forbidden_stand_in(p.unary, l, p.weights, &v)?;
+    let big = if plain {
+        C::ZERO
+    } else {
+        forbidden_stand_in(p.unary, l, p.weights, &v)?
+    };
     let one = C::from_i32(1);
     let potts = (0..l * l).all(|k| v[k] == if k / l == k % l { C::ZERO } else { one });
     Ok(Checked {
@@ -455,7 +483,7 @@ impl<C: Cost> Checked<'_, C> {
 /// The energy of `labels` (with `unary` N×L etc. as in [`CrfProblem`]).
 /// Returns [`Cost::FORBIDDEN`] if a node has a forbidden label.
 pub fn energy<C: Cost>(problem: &CrfProblem<C>, labels: &[i32]) -> Result<C> {
-    let c = check_problem(problem, false)?;
+    let c = check_problem(problem, false, false)?;
     ensure(labels.len() == c.n, "labels", || {
         format!("length {} does not match {} nodes", labels.len(), c.n)
     })?;
@@ -598,7 +626,11 @@ impl<C: Cost> CrfSolver<C> {
     }
 
     fn check<'a>(&self, problem: &CrfProblem<'a, C>, metric: bool) -> Result<Checked<'a, C>> {
-        let c = check_problem(problem, metric)?;
+        // The solver's own edges were checked against its node count when it was
+        // built; equal edges and node count need no second range check.
+        let same_edges = problem.edges == self.edges.as_slice();
+        let n = problem.unary.len() / problem.n_labels.max(1);
+        let c = check_problem(problem, metric, same_edges && n == self.graph.n_nodes())?;
         ensure(c.n == self.graph.n_nodes(), "unary", || {
             format!(
                 "{} nodes, but the solver was built for {}",
@@ -606,7 +638,7 @@ impl<C: Cost> CrfSolver<C> {
                 self.graph.n_nodes()
             )
         })?;
-        ensure(problem.edges == self.edges.as_slice(), "edges", || {
+        ensure(same_edges, "edges", || {
             "differ from the edges the solver was built with".into()
         })?;
         Ok(c)
@@ -715,6 +747,25 @@ impl<C: Cost> CrfSolver<C> {
     /// Puts node `i`, labelled `fi`, in the set of every other label it may switch to.
     #[inline]
     fn add_candidate(&mut self, c: &Checked<C>, i: usize, fi: usize) {
+        // Potts without forbidden costs (the EM's case): V(f_i, α) = 1 and the graph's
+        // unary is the unary, so the test of `may_switch` is U_i(α) − U_i(f_i) ≤ W_i
+        // for every α at once, as a bit mask (same arithmetic, same outcome).
+        if self.prune && c.potts && c.big == C::ZERO && c.l <= 64 {
+            if let Some(slack) = self.incident_weight[i] {
+                let row = &c.unary[i * c.l..(i + 1) * c.l];
+                let base = row[fi];
+                let mut mask = row
+                    .iter()
+                    .enumerate()
+                    .fold(0u64, |m, (a, &u)| m | (((u - base <= slack) as u64) << a));
+                mask &= !(1u64 << fi);
+                while mask != 0 {
+                    self.candidates[mask.trailing_zeros() as usize].set(i);
+                    mask &= mask - 1;
+                }
+                return;
+            }
+        }
         for a in 0..c.l {
             if a != fi && self.may_switch(c, i, fi, a) {
                 self.candidates[a].set(i);
@@ -832,7 +883,8 @@ impl<C: Cost> CrfSolver<C> {
             self.graph.update_tweights_unchecked(i, x1 - m, x0 - m);
         }
         self.touched_nodes.extend_from_slice(&self.free);
-        self.graph.maxflow();
+        // Only the free nodes have terminal arcs (and edges): the solve visits them alone.
+        self.graph.maxflow_seeded(&self.free);
         // The switched nodes: free and on the sink side.
         self.candidate.copy_from_slice(labels);
         for &i in &self.free {
@@ -1200,7 +1252,7 @@ mod tests {
     }
 
     fn c_init(p: &CrfProblem<i64>) -> Vec<i32> {
-        check_problem(p, false).unwrap().argmin_unary()
+        check_problem(p, false, false).unwrap().argmin_unary()
     }
 
     #[test]
@@ -1322,7 +1374,7 @@ mod tests {
             let labels: Vec<i32> = (0..n)
                 .map(|i| ((seed as usize / (i + 1) + i * 7) % p.l) as i32)
                 .collect();
-            let c = check_problem(&v, true).unwrap();
+            let c = check_problem(&v, true, false).unwrap();
             let e0 = c.energy(&labels);
             // One solver for every move in turn: the graph is cleared only where the
             // previous move touched it.
@@ -1352,7 +1404,7 @@ mod tests {
         init: &[i32],
         cycles: usize,
     ) -> Vec<i32> {
-        let c = check_problem(p, true).unwrap();
+        let c = check_problem(p, true, false).unwrap();
         let mut s = CrfSolver::new(c.n, p.edges).unwrap();
         s.prepare_expansion(&c);
         let mut labels = init.to_vec();

@@ -355,6 +355,14 @@ pub struct Graph<C: Capacity> {
     orphans: VecDeque<u32>,
     /// True once `maxflow` ran and the trees describe the residual graph.
     trees_valid: bool,
+    /// Every node is free with a zero time stamp and distance (the state a fresh solve
+    /// gives a node without a terminal arc), so [`Graph::maxflow_seeded`] need visit
+    /// only the nodes with terminal capacity.
+    clean: bool,
+    /// Every node that is not free was put in a search tree by a solve since the last
+    /// reset (and so is an end of an edge or a node with capacity since then):
+    /// [`Graph::reset_touched`] then leaves the graph clean.
+    bounded: bool,
 }
 
 impl<C: Capacity> Graph<C> {
@@ -409,6 +417,8 @@ impl<C: Capacity> Graph<C> {
             active: ActiveQueue::new(n_nodes),
             orphans: VecDeque::new(),
             trees_valid: false,
+            clean: true,
+            bounded: true,
         })
     }
 
@@ -828,6 +838,9 @@ impl<C: Capacity> Graph<C> {
         if let Some(t) = &mut self.terminal_caps {
             t.fill([C::ZERO; 2]);
         }
+        // Search states of earlier solves stay where they were, at nodes no later
+        // `reset_touched` list needs to name.
+        self.bounded = self.clean;
         self.forget_solve();
     }
 
@@ -851,14 +864,33 @@ impl<C: Capacity> Graph<C> {
         self.finalize();
         for &k in edges {
             self.set_edge_caps_unchecked(k as usize, C::ZERO, C::ZERO);
+            // A solve can put a node in a tree only through a terminal arc or an arc
+            // with capacity, so these ends and `nodes` hold every non-free state.
+            let a = self.edge_arc[k as usize];
+            if a != NO_ARC {
+                let a = a as usize;
+                let s = self.sister(a);
+                for x in [self.arcs[a].hw & HEAD_MASK, self.arcs[s].hw & HEAD_MASK] {
+                    self.free_node(x as usize);
+                }
+            }
         }
         for &i in nodes {
             self.nodes[i as usize].tr = C::ZERO;
+            self.free_node(i as usize);
             if let Some(t) = &mut self.terminal_caps {
                 t[i as usize] = [C::ZERO; 2];
             }
         }
+        self.clean = self.bounded;
         self.forget_solve();
+    }
+
+    #[inline(always)]
+    fn free_node(&mut self, i: usize) {
+        let v = &mut self.nodes[i];
+        v.parent = FREE;
+        v.tsd = 0;
     }
 
     /// Sets the capacities of edge `k` (its index from [`Graph::add_edge`] or the order of
@@ -963,6 +995,8 @@ impl<C: Capacity> Graph<C> {
                 let root = v.parent & !SINK_BIT == TERMINAL;
                 v.tsd = pack_tsd(0, if root { 1 } else { 0xFFFF });
             }
+            // Free nodes outside this solve's trees now hold a state too.
+            self.bounded = false;
             self.time = 1;
         }
     }
@@ -998,6 +1032,46 @@ impl<C: Capacity> Graph<C> {
                 v.tsd = 0;
             }
         }
+        self.active.start_sweep();
+    }
+
+    /// [`Self::init_fresh`] on a clean graph whose terminal arcs are all at `seeds`:
+    /// every other node is already free, so only the seeds are visited. The active
+    /// nodes are swept in index order whatever the order of `seeds`.
+    fn init_seeded(&mut self, seeds: &[u32]) {
+        self.active.clear();
+        self.orphans.clear();
+        self.time = 0;
+        for &i in &self.changed {
+            self.changed_bits.clear(i as usize);
+        }
+        self.changed.clear();
+        for &iu in seeds {
+            let i = iu as usize;
+            let v = &mut self.nodes[i];
+            let tr = v.tr;
+            if tr > C::ZERO {
+                v.parent = TERMINAL;
+                v.tsd = pack_tsd(0, 1);
+                self.active.mark_initial(i);
+            } else if tr < C::ZERO {
+                v.parent = TERMINAL | SINK_BIT;
+                v.tsd = pack_tsd(0, 1);
+                self.active.mark_initial(i);
+            }
+        }
+        debug_assert!(
+            (0..self.n).all(|i| {
+                let v = self.nodes[i];
+                let (tr, parent, tsd) = (v.tr, v.parent, v.tsd);
+                if tr != C::ZERO {
+                    parent & !SINK_BIT == TERMINAL
+                } else {
+                    parent == FREE && tsd == 0
+                }
+            }),
+            "maxflow_seeded: a node outside the seeds has terminal capacity or a search state"
+        );
         self.active.start_sweep();
     }
 
@@ -1053,14 +1127,33 @@ impl<C: Capacity> Graph<C> {
     /// Computes the maximum flow (and so the minimum cut) and returns its value. Called
     /// again after terminal capacity changes, it continues from the previous state.
     pub fn maxflow(&mut self) -> C {
+        self.solve(None)
+    }
+
+    /// [`Graph::maxflow`] for a graph in which only `seeds` may have terminal
+    /// capacity: when the graph is clean (after [`Graph::reset_touched`] of a solved
+    /// graph, or new) a fresh solve visits just `seeds` instead of every node, so a
+    /// small problem on a large graph (an expansion move with few free nodes) costs
+    /// only its own size. Same flow and cut as `maxflow`.
+    pub(crate) fn maxflow_seeded(&mut self, seeds: &[u32]) -> C {
+        self.solve(Some(seeds))
+    }
+
+    fn solve(&mut self, seeds: Option<&[u32]>) -> C {
         if self.needs_build() {
             self.build();
         }
         if self.trees_valid {
             self.init_reuse();
         } else {
-            self.init_fresh();
+            match seeds {
+                Some(seeds) if self.clean => self.init_seeded(seeds),
+                _ => self.init_fresh(),
+            }
+            // Only the trees of this solve are not free from here on.
+            self.bounded = true;
         }
+        self.clean = false;
         self.run();
         self.trees_valid = true;
         self.flow
@@ -1710,6 +1803,57 @@ mod tests {
         g.add_edge(1, 2, 2, 0).unwrap();
         assert_eq!(g.maxflow(), 2);
         assert!(!g.is_sink_side(0) && g.is_sink_side(2));
+    }
+
+    proptest! {
+        /// Rounds as an expansion solver runs them on one graph: capacities on a subset
+        /// of the nodes and the edges inside it, a seeded solve, `reset_touched`. Every
+        /// round's flow and cut equal the brute-force minimum cut of its capacities,
+        /// also with an occasional full `reset` and the adoption clock restarting.
+        #[test]
+        fn seeded_solves_after_touched_resets_match_brute_force(
+            p in problem(9),
+            rounds in prop::collection::vec(
+                (any::<u16>(), prop::collection::vec((0i64..12, 0i64..12, 0i64..10, 0i64..10), 9), any::<bool>()),
+                1..6,
+            ),
+            max_time in 1u32..40,
+        ) {
+            let mut g = Graph::<i64>::new(p.n);
+            g.keep_edge_index();
+            g.set_max_time(max_time);
+            for &(i, j, _, _) in &p.edges {
+                g.add_edge(i, j, 0, 0).unwrap();
+            }
+            g.finalize();
+            for (mask, caps, full_reset) in rounds {
+                let seeds: Vec<u32> = (0..p.n as u32).filter(|&i| mask >> i & 1 == 1).collect();
+                let inside = |i: usize| mask >> i & 1 == 1;
+                let mut q = Problem { n: p.n, edges: Vec::new(), terms: vec![(0, 0); p.n] };
+                let mut touched = Vec::new();
+                for (k, &(i, j, _, _)) in p.edges.iter().enumerate() {
+                    if inside(i) && inside(j) && i != j {
+                        let (c, r) = (caps[i].2, caps[j].3);
+                        g.set_edge_caps_unchecked(k, c, r);
+                        touched.push(k as u32);
+                        q.edges.push((i, j, c, r));
+                    }
+                }
+                for &i in &seeds {
+                    let (s, t, _, _) = caps[i as usize];
+                    g.update_tweights_unchecked(i as usize, s, t);
+                    q.terms[i as usize] = (s, t);
+                }
+                prop_assert_eq!(g.maxflow_seeded(&seeds), brute_min_cut(&q));
+                prop_assert_eq!(cut_value(&q, &g.segments()), g.flow());
+                g.check_trees();
+                if full_reset {
+                    g.reset();
+                } else {
+                    g.reset_touched(&touched, &seeds);
+                }
+            }
+        }
     }
 
     #[test]

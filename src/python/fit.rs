@@ -480,6 +480,35 @@ fn fit_poses(
     Ok(results.into_iter().map(|r| args.result(r)).collect())
 }
 
+/// `result` (a fit of this image with `config`, made with `label_all_pixels` off)
+/// labelled at every pixel, as the fit with `label_all_pixels` on would have been.
+#[pyfunction]
+#[pyo3(signature = (depth, camera, result, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
+#[allow(clippy::too_many_arguments)]
+fn label_all_pixels(
+    py: Python<'_>,
+    depth: &Bound<'_, PyAny>,
+    camera: &PyCamera,
+    result: PyRef<'_, PyFitResult>,
+    model: Option<&PyBodyModel>,
+    mask: Option<&Bound<'_, PyAny>>,
+    config: Option<&PyFitConfig>,
+    prior: Option<&Bound<'_, PyAny>>,
+    prior_weight: f64,
+) -> PyResult<PyFitResult> {
+    let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
+    let cam = camera.inner;
+    let fit = &result.result;
+    let labelled = py.detach(|| {
+        fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.label_all(
+            &args.model,
+            fit,
+            args.prior.as_ref(),
+        )
+    })?;
+    Ok(args.result(labelled))
+}
+
 /// The pose (22,) whose joints best match `joints` (15, 3) (NaN rows are skipped).
 #[pyfunction]
 #[pyo3(signature = (joints, model=None, init=None))]
@@ -514,6 +543,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyShapeFitResult>()?;
     m.add_function(wrap_pyfunction!(fit_pose, m)?)?;
     m.add_function(wrap_pyfunction!(fit_poses, m)?)?;
+    m.add_function(wrap_pyfunction!(label_all_pixels, m)?)?;
     m.add_function(wrap_pyfunction!(pose_from_joints, m)?)?;
     Ok(())
 }
