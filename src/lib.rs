@@ -5,6 +5,31 @@
 //! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
 //! [`python`] behind the `python` feature; algorithms never live there.
 
+/// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
+/// has it (detected at run time), and the portable build otherwise. The body is an
+/// `#[inline(always)]` inner function, so each variant gets its own code. Same results
+/// either way: Rust does not fuse multiplies and adds on its own.
+macro_rules! avx2_dispatch {
+    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
+        $(#[$meta])*
+        fn $name($($arg: $ty),*) $(-> $ret)? {
+            #[inline(always)]
+            fn body($($arg: $ty),*) $(-> $ret)? $body
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2")]
+            unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
+                body($($arg),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { avx2($($arg),*) };
+            }
+            body($($arg),*)
+        }
+    };
+}
+
 pub mod assignment;
 pub mod body;
 pub mod camera;

@@ -1153,31 +1153,6 @@ impl Representatives {
     }
 }
 
-/// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
-/// has it (detected at run time), and the portable build otherwise. The body is an
-/// `#[inline(always)]` inner function, so each variant gets its own code. Same results
-/// either way: Rust does not fuse multiplies and adds on its own.
-macro_rules! avx2_dispatch {
-    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
-        $(#[$meta])*
-        fn $name($($arg: $ty),*) $(-> $ret)? {
-            #[inline(always)]
-            fn body($($arg: $ty),*) $(-> $ret)? $body
-            #[cfg(target_arch = "x86_64")]
-            #[target_feature(enable = "avx2")]
-            unsafe fn avx2($($arg: $ty),*) $(-> $ret)? {
-                body($($arg),*)
-            }
-            #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
-                return unsafe { avx2($($arg),*) };
-            }
-            body($($arg),*)
-        }
-    };
-}
-
 avx2_dispatch! {
     /// Pruning score × the number of representatives: the sum over representatives of
     /// the cost of their nearest template sample, or `None` as soon as the partial sum

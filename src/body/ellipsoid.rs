@@ -672,6 +672,21 @@ impl SortedPlacement {
         self.level(y) >= b.level || y[0] * y[0] + y[1] * y[1] + y[2] * y[2] >= b.norm2
     }
 
+    /// [`Self::local`] and [`Self::is_beyond`] of many camera-frame points at once, the
+    /// points given one coordinate per slice: `local[r][i]` and `beyond[i]` for point
+    /// `i < beyond.len()`, bit for bit the one-point values, several points to a vector
+    /// register (with AVX2 where the CPU has it).
+    #[inline]
+    pub fn locals_beyond(
+        &self,
+        b: &Beyond,
+        points: [&[f64]; 3],
+        local: [&mut [f64]; 3],
+        beyond: &mut [bool],
+    ) {
+        locals_beyond_soa(self, b, points, local, beyond);
+    }
+
     /// Splits camera-frame points by the truncation distance `t`: `far(i)` for each
     /// `(i, p)` of `items` whose distance lower bound is at least `t` (its exact
     /// distance is not needed), and the others, in local coordinates, written to the
@@ -827,6 +842,37 @@ impl SortedPlacement {
         let ys = [y[0].abs(), y[1].abs(), y[2].abs()];
         let x = closest_sorted(&self.sorted, ys);
         (self.signed_from_closest(&ys, &x), self.normal_at(&y, &x))
+    }
+}
+
+avx2_dispatch! {
+    /// [`SortedPlacement::locals_beyond`]: the same expressions as the one-point
+    /// methods, in the same order (no reassociation, no fused multiply-add), so the
+    /// values are identical.
+    fn locals_beyond_soa(
+        e: &SortedPlacement,
+        b: &Beyond,
+        points: [&[f64]; 3],
+        local: [&mut [f64]; 3],
+        beyond: &mut [bool],
+    ) {
+        let n = beyond.len();
+        let [px, py, pz] = points;
+        let (px, py, pz) = (&px[..n], &py[..n], &pz[..n]);
+        let [l0, l1, l2] = local;
+        let (l0, l1, l2) = (&mut l0[..n], &mut l1[..n], &mut l2[..n]);
+        let (a, c, inv) = (&e.axes, &e.centre, &e.inv_e2);
+        for i in 0..n {
+            let d = [px[i] - c[0], py[i] - c[1], pz[i] - c[2]];
+            let y0 = a[0][0] * d[0] + a[0][1] * d[1] + a[0][2] * d[2];
+            let y1 = a[1][0] * d[0] + a[1][1] * d[1] + a[1][2] * d[2];
+            let y2 = a[2][0] * d[0] + a[2][1] * d[1] + a[2][2] * d[2];
+            l0[i] = y0;
+            l1[i] = y1;
+            l2[i] = y2;
+            let level = y0 * y0 * inv[0] + y1 * y1 * inv[1] + y2 * y2 * inv[2];
+            beyond[i] = (level >= b.level) | (y0 * y0 + y1 * y1 + y2 * y2 >= b.norm2);
+        }
     }
 }
 
@@ -1023,6 +1069,25 @@ mod tests {
                 if t <= 0.0 || (lower - t).abs() > 1e-12 * t {
                     prop_assert_eq!(fast.is_beyond(&fast.beyond(t), &yl), lower >= t, "t {}", t);
                 }
+            }
+            // Many points at once: the same local coordinates and test, bit for bit.
+            let cloud: Vec<[f64; 3]> = (0..11)
+                .map(|k| {
+                    let f = 0.3 * k as f64 - 1.5;
+                    [pa[0] + f * 0.1, pa[1] - f * f * 0.05, pa[2] + f * 0.07]
+                })
+                .collect();
+            let coord = |r: usize| cloud.iter().map(|p| p[r]).collect::<Vec<f64>>();
+            let (cx, cy, cz) = (coord(0), coord(1), coord(2));
+            let mut local = [vec![0.0; 11], vec![0.0; 11], vec![0.0; 11]];
+            let mut beyond = vec![false; 11];
+            let b = fast.beyond(0.5 * lower + 0.01);
+            let [l0, l1, l2] = &mut local;
+            fast.locals_beyond(&b, [&cx, &cy, &cz], [l0, l1, l2], &mut beyond);
+            for (i, p) in cloud.iter().enumerate() {
+                let y = fast.local(p);
+                prop_assert_eq!([local[0][i], local[1][i], local[2][i]], y);
+                prop_assert_eq!(beyond[i], fast.is_beyond(&b, &y));
             }
             // The batched queries (lockstep lanes, and the scalar tail) give the same
             // distance and normal, whichever lane (or the tail) the point takes.

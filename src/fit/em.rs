@@ -254,36 +254,219 @@ pub fn unary_costs(
     tau: f64,
     unary: &mut [f64],
 ) {
+    fill_unary(model, points, pose, config, tau, None, unary);
+}
+
+/// What an E-step knows before its unary terms: each point's label (0..=[`OUTLIER`])
+/// and the most its edges can give back when it switches (the sum of its edge
+/// weights, Potts), and where to mark the terms it leaves out.
+pub struct HeldLabels<'a> {
+    pub labels: &'a [i32],
+    pub slack: &'a [f64],
+    /// Per point: bit k set where segment k's cost was not computed (see
+    /// [`unary_costs_for_labels`]).
+    pub skipped: &'a mut [u32],
+}
+
+/// [`unary_costs`] for an E-step that starts from `held.labels`, computing only the
+/// terms its expansion can use. A point's cost for its own label is exact; another
+/// segment whose cost, bounded below without the exact distance, exceeds that cost by
+/// more than the point's `slack` (the sum of its edge weights) is not computed: no
+/// move from the point's label can reach it (the expansion's pruning test leaves it
+/// out) and its term is set to the cap, which is at least the true cost. Such terms
+/// are marked in `skipped` so that a point that does end at one (possible only after
+/// first moving to a costlier label) gets its exact cost back ([`settle_unary`]). The
+/// energy stays exact at every labelling the EM keeps, and an E-step from `labels`
+/// can only lower it.
+pub fn unary_costs_for_labels(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    pose: &Pose,
+    config: &EmConfig,
+    tau: f64,
+    held: HeldLabels<'_>,
+    unary: &mut [f64],
+) {
+    fill_unary(model, points, pose, config, tau, Some(held), unary);
+}
+
+/// Relative margin of the skip test of [`unary_costs_for_labels`], so that rounding
+/// never skips a term the expansion's own test (with the exact term) would admit.
+const SKIP_MARGIN: f64 = 1e-9;
+
+fn fill_unary(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    pose: &Pose,
+    config: &EmConfig,
+    tau: f64,
+    held: Option<HeldLabels<'_>>,
+    unary: &mut [f64],
+) {
     let geo = PoseGeometry::new(model, pose);
     let pc = config.point_cost(tau);
+    let chunk = |u: &mut [f64], pts: &[[f32; 3]], held: Option<(&[i32], &[f64], &mut [u32])>| {
+        unary_chunk(&geo, &pc, config.outlier_cost(tau), u, pts, held)
+    };
+    let rows = unary.par_chunks_mut(CHUNK_POINTS * NUM_LABELS);
+    let pts = points.par_chunks(CHUNK_POINTS);
+    match held {
+        None => rows.zip(pts).for_each(|(u, p)| chunk(u, p, None)),
+        Some(h) => {
+            debug_assert!(h.labels.len() == points.len() && h.slack.len() == points.len());
+            rows.zip(pts)
+                .zip(h.labels.par_chunks(CHUNK_POINTS))
+                .zip(h.slack.par_chunks(CHUNK_POINTS))
+                .zip(h.skipped.par_chunks_mut(CHUNK_POINTS))
+                .for_each(|((((u, p), l), w), sk)| chunk(u, p, Some((l, w, sk))))
+        }
+    }
+}
+
+/// [`fill_unary`] for one chunk of points (see [`unary_costs_for_labels`] for `held`).
+fn unary_chunk(
+    geo: &PoseGeometry,
+    pc: &PointCost,
+    outlier: f64,
+    u: &mut [f64],
+    pts: &[[f32; 3]],
+    held: Option<(&[i32], &[f64], &mut [u32])>,
+) {
     let cap = pc.cap();
-    let outlier = config.outlier_cost(tau);
-    unary
-        .par_chunks_mut(CHUNK_POINTS * NUM_LABELS)
-        .zip(points.par_chunks(CHUNK_POINTS))
-        .for_each(|(u, pts)| {
-            let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
-            let buf = to_f64(pts, &mut buf);
-            let mut near_buf = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
-            for (k, e) in geo.segments.iter().enumerate() {
-                // A lower bound of the distance at or beyond the truncation means the
-                // cost is the cap, exactly what the exact distance would give; only
-                // the points nearer than that need the exact (iterative) distance.
-                let items = buf.iter().copied().enumerate();
-                let near = e.split_near(
-                    pc.truncation,
-                    items,
-                    |i| u[i * NUM_LABELS + k] = cap,
-                    &mut near_buf,
-                );
-                e.signed_distances_batched(near.iter().copied(), |i, d| {
-                    u[i * NUM_LABELS + k] = pc.cost(d)
-                });
+    let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
+    let buf = to_f64(pts, &mut buf);
+    let mut near_buf = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
+    // Per point: its label (none: −1) and the most another label may cost and still be
+    // within the expansion's reach.
+    let mut own = [-1i32; CHUNK_POINTS];
+    let mut reach = [f64::INFINITY; CHUNK_POINTS];
+    let mut skipped: &mut [u32] = &mut [];
+    if let Some((labels, slack, sk)) = held {
+        own[..labels.len()].copy_from_slice(labels);
+        sk.fill(0);
+        skipped = sk;
+        for (i, &l) in labels.iter().enumerate() {
+            if l == OUTLIER {
+                reach[i] = outlier + slack[i];
             }
-            for row in u.chunks_exact_mut(NUM_LABELS) {
-                row[NUM_SEGMENTS] = outlier;
+        }
+        // The points by label (counting sort), each segment's in ascending order.
+        let mut start = [0usize; NUM_LABELS + 1];
+        for &l in labels {
+            start[l.clamp(0, OUTLIER) as usize + 1] += 1;
+        }
+        for k in 0..NUM_LABELS {
+            start[k + 1] += start[k];
+        }
+        let mut by_label = [0u16; CHUNK_POINTS];
+        let mut next = start;
+        for (i, &l) in labels.iter().enumerate() {
+            let k = l.clamp(0, OUTLIER) as usize;
+            by_label[next[k]] = i as u16;
+            next[k] += 1;
+        }
+        for (k, e) in geo.segments.iter().enumerate() {
+            let mine = by_label[start[k]..start[k + 1]].iter().map(|&i| {
+                let i = i as usize;
+                (i, e.local(&buf[i]))
+            });
+            e.signed_distances_batched(mine, |i, d| {
+                let c = pc.cost(d);
+                u[i * NUM_LABELS + k] = c;
+                reach[i] = c + slack[i];
+            });
+        }
+        for r in &mut reach[..labels.len()] {
+            *r += SKIP_MARGIN * (1.0 + r.abs());
+        }
+    }
+    let known = !skipped.is_empty();
+    // The points one coordinate per array, for the vectorised split below.
+    let n = pts.len();
+    let mut soa = [[0.0f64; CHUNK_POINTS]; 3];
+    for (i, p) in buf.iter().enumerate() {
+        for r in 0..3 {
+            soa[r][i] = p[r];
+        }
+    }
+    let mut local = [[0.0f64; CHUNK_POINTS]; 3];
+    let mut beyond = [false; CHUNK_POINTS];
+    for (k, e) in geo.segments.iter().enumerate() {
+        // A lower bound of the distance at or beyond the truncation means the cost is
+        // the cap, exactly what the exact distance would give; only the points nearer
+        // than that need the exact (iterative) distance.
+        let [l0, l1, l2] = &mut local;
+        e.locals_beyond(
+            &e.beyond(pc.truncation),
+            [&soa[0][..n], &soa[1][..n], &soa[2][..n]],
+            [&mut l0[..n], &mut l1[..n], &mut l2[..n]],
+            &mut beyond[..n],
+        );
+        // The far points cost the cap; the near ones, in order, go to the exact
+        // distance (the own label's term is already there).
+        let mut m = 0;
+        for i in 0..n {
+            let mine = own[i] == k as i32;
+            let cell = &mut u[i * NUM_LABELS + k];
+            *cell = if mine { *cell } else { cap };
+            near_buf[m] = (i, [local[0][i], local[1][i], local[2][i]]);
+            m += usize::from(!beyond[i] && !mine);
+        }
+        if known {
+            // Also the points whose cost is certainly beyond reach.
+            let mut kept = 0;
+            for j in 0..m {
+                let (i, y) = near_buf[j];
+                if pc.cost(e.distance_lower_bound(&y)) > reach[i] {
+                    u[i * NUM_LABELS + k] = cap;
+                    skipped[i] |= 1 << k;
+                } else {
+                    near_buf[kept] = near_buf[j];
+                    kept += 1;
+                }
             }
+            m = kept;
+        }
+        e.signed_distances_batched(near_buf[..m].iter().copied(), |i, d| {
+            u[i * NUM_LABELS + k] = pc.cost(d)
         });
+    }
+    for row in u.chunks_exact_mut(NUM_LABELS) {
+        row[NUM_SEGMENTS] = outlier;
+    }
+}
+
+/// After an E-step on terms from [`unary_costs_for_labels`]: the exact cost of every
+/// point that ended at a segment whose term was skipped (rare), so that the energy
+/// of `labels` is exact. Returns how many terms were settled.
+#[allow(clippy::too_many_arguments)]
+pub fn settle_unary(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    pose: &Pose,
+    config: &EmConfig,
+    tau: f64,
+    labels: &[i32],
+    unary: &mut [f64],
+    skipped: &mut [u32],
+) -> usize {
+    let pending: Vec<usize> = (0..labels.len())
+        .filter(|&i| (0..OUTLIER).contains(&labels[i]) && skipped[i] >> labels[i] & 1 == 1)
+        .collect();
+    if pending.is_empty() {
+        return 0;
+    }
+    let geo = PoseGeometry::new(model, pose);
+    let pc = config.point_cost(tau);
+    for &i in &pending {
+        let k = labels[i] as usize;
+        let e = &geo.segments[k];
+        let p = points[i];
+        let y = e.local(&[p[0] as f64, p[1] as f64, p[2] as f64]);
+        unary[i * NUM_LABELS + k] = pc.cost(e.signed_distance_local(&y));
+        skipped[i] &= !(1 << k);
+    }
+    pending.len()
 }
 
 fn problem<'a>(unary: &'a [f64], edges: &'a [[u32; 2]], weights: &'a [f64]) -> CrfProblem<'a, f64> {
@@ -353,7 +536,14 @@ impl PointLabels {
 struct EStep<'g> {
     graph: &'g PixelGraph,
     weights: Vec<f64>,
+    /// Per point: the sum of its edge weights (see [`unary_costs_for_labels`]).
+    slack: Vec<f64>,
     unary: Vec<f64>,
+    /// Per point: the segments whose terms `unary` left out (bit per segment).
+    skipped: Vec<u32>,
+    /// The pose and τ of `unary`.
+    pose: Pose,
+    tau: f64,
     solver: CrfSolver<f64>,
     moves: MoveConfig,
 }
@@ -362,10 +552,21 @@ impl<'g> EStep<'g> {
     fn new(graph: &'g PixelGraph, n: usize, config: &EmConfig) -> Result<Self> {
         let mut weights = Vec::with_capacity(graph.len());
         edge_weights(graph, config, &mut weights);
+        let mut slack = vec![0.0; n];
+        for (&[i, j], &w) in graph.edges.iter().zip(&weights) {
+            if i != j {
+                slack[i as usize] += w;
+                slack[j as usize] += w;
+            }
+        }
         Ok(EStep {
             graph,
             weights,
+            slack,
             unary: vec![0.0; n * NUM_LABELS],
+            skipped: vec![0; n],
+            pose: [0.0; crate::body::NUM_PARAMS],
+            tau: 0.0,
             solver: CrfSolver::<f64>::new(n, &graph.edges)?,
             moves: MoveConfig {
                 max_cycles: config.expansion_cycles,
@@ -373,7 +574,8 @@ impl<'g> EStep<'g> {
         })
     }
 
-    /// The unary terms of `points` at `pose` and outlier distance `tau`.
+    /// The unary terms of `points` at `pose` and outlier distance `tau`: all of them,
+    /// or with `labels` (the labels the next expansion starts from) those it can use.
     fn set_pose(
         &mut self,
         model: &BodyModel,
@@ -381,8 +583,29 @@ impl<'g> EStep<'g> {
         pose: &Pose,
         config: &EmConfig,
         tau: f64,
+        labels: Option<&[i32]>,
     ) {
-        unary_costs(model, points, pose, config, tau, &mut self.unary);
+        self.pose = *pose;
+        self.tau = tau;
+        match labels {
+            None => {
+                self.skipped.fill(0);
+                unary_costs(model, points, pose, config, tau, &mut self.unary)
+            }
+            Some(labels) => unary_costs_for_labels(
+                model,
+                points,
+                pose,
+                config,
+                tau,
+                HeldLabels {
+                    labels,
+                    slack: &self.slack,
+                    skipped: &mut self.skipped,
+                },
+                &mut self.unary,
+            ),
+        }
     }
 
     /// The CRF energy of `labels` (without the prior).
@@ -402,13 +625,31 @@ impl<'g> EStep<'g> {
             .collect()
     }
 
-    /// Alpha-expansion from `init`.
-    fn expand(&mut self, init: &[i32]) -> Result<Vec<i32>> {
+    /// Alpha-expansion from `init`; the terms of the labels it ends with are exact
+    /// (see [`settle_unary`]).
+    fn expand(
+        &mut self,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        config: &EmConfig,
+        init: &[i32],
+    ) -> Result<Vec<i32>> {
         let p = problem(&self.unary, &self.graph.edges, &self.weights);
-        Ok(self
+        let labels = self
             .solver
             .alpha_expansion(&p, Some(init), &self.moves)?
-            .labels)
+            .labels;
+        settle_unary(
+            model,
+            points,
+            &self.pose,
+            config,
+            self.tau,
+            &labels,
+            &mut self.unary,
+            &mut self.skipped,
+        );
+        Ok(labels)
     }
 }
 
@@ -434,8 +675,8 @@ pub fn label_points(
         ));
     }
     let mut crf = EStep::new(graph, n, config)?;
-    crf.set_pose(model, points, pose, config, tau);
-    let labels = crf.expand(init)?;
+    crf.set_pose(model, points, pose, config, tau, Some(init));
+    let labels = crf.expand(model, points, config, init)?;
     let energy = crf.energy(&labels);
     Ok((PointLabels::new(labels), energy))
 }
@@ -493,7 +734,6 @@ pub fn hard_em_from(
     let mut pose = BodyModel::clamp_pose(init);
     let mut iterations = resume.map_or(0, |r| r.iterations);
     let mut tau = config.outlier_distance_at(iterations);
-    crf.set_pose(model, points, &pose, config, tau);
     let mut labels: Vec<i32> = match resume {
         Some(r) => {
             if r.labels.len() != n {
@@ -511,12 +751,15 @@ pub fn hard_em_from(
                     ),
                 ));
             }
+            crf.set_pose(model, points, &pose, config, tau, Some(r.labels));
             r.labels.to_vec()
         }
         None => {
-            // Initial labels: the cheapest label of each point, then the CRF.
+            // Initial labels: the cheapest label of each point (all terms needed), then
+            // the CRF.
+            crf.set_pose(model, points, &pose, config, tau, None);
             let cheapest = crf.cheapest_labels();
-            crf.expand(&cheapest)?
+            crf.expand(model, points, config, &cheapest)?
         }
     };
     let mut energy = crf.energy(&labels) + prior_cost(&pose);
@@ -546,7 +789,7 @@ pub fn hard_em_from(
         // E(pose, τ), so the energy still never increases (checked, not assumed).
         let next_tau = config.outlier_distance_at(iterations);
         if pose_moved {
-            crf.set_pose(model, points, &new_pose, config, next_tau);
+            crf.set_pose(model, points, &new_pose, config, next_tau, Some(&labels));
             let e = crf.energy(&labels) + prior_cost(&new_pose);
             if e <= energy {
                 pose = new_pose;
@@ -554,17 +797,17 @@ pub fn hard_em_from(
                 tau = next_tau;
             } else {
                 // Cannot happen in exact arithmetic; keep the better state.
-                crf.set_pose(model, points, &pose, config, tau);
+                crf.set_pose(model, points, &pose, config, tau, Some(&labels));
             }
             trace.push(energy);
         }
         if next_tau != tau {
             tau = next_tau;
-            crf.set_pose(model, points, &pose, config, tau);
+            crf.set_pose(model, points, &pose, config, tau, Some(&labels));
             energy = crf.energy(&labels) + prior_cost(&pose);
         }
         // E-step.
-        let new_labels = crf.expand(&labels)?;
+        let new_labels = crf.expand(model, points, config, &labels)?;
         let changed = new_labels
             .iter()
             .zip(&labels)
@@ -666,6 +909,104 @@ mod tests {
             }
             // The skipping is exercised: many pairs are saturated.
             assert!(saturated > points.len() * 4, "{saturated}");
+        }
+    }
+
+    /// With labels: the own label's term exact; every other term exact or, where
+    /// skipped, the cap with an exact cost beyond the own cost plus the slack (out of
+    /// the expansion's reach); `settle_unary` makes the labels' terms exact.
+    #[test]
+    fn unary_for_labels_skips_only_terms_out_of_reach() {
+        let model = BodyModel::default();
+        let config = EmConfig::default();
+        let pose = pose_for_tests(3);
+        let joints = model.joints(&pose);
+        let mut s = 17u64;
+        let mut next = || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((s >> 11) as f64) / ((1u64 << 53) as f64)
+        };
+        let n = 2000;
+        let points: Vec<[f32; 3]> = (0..n)
+            .map(|i| {
+                let j = joints[i % joints.len()];
+                [
+                    (j.x + 0.3 * (next() - 0.5)) as f32,
+                    (j.y + 0.3 * (next() - 0.5)) as f32,
+                    (j.z + 0.3 * (next() - 0.5)) as f32,
+                ]
+            })
+            .collect();
+        let slack: Vec<f64> = (0..n).map(|_| 8.0 * next()).collect();
+        let tau = 0.15;
+        let mut exact = vec![0.0; n * NUM_LABELS];
+        unary_costs(&model, &points, &pose, &config, tau, &mut exact);
+        // Every other point at its cheapest label (as after an E-step), the rest at random.
+        let labels: Vec<i32> = (0..n)
+            .map(|i| {
+                let row = &exact[i * NUM_LABELS..(i + 1) * NUM_LABELS];
+                let cheapest = (0..NUM_LABELS).min_by(|&a, &b| row[a].total_cmp(&row[b]));
+                match i % 2 {
+                    0 => cheapest.unwrap() as i32,
+                    _ => (next() * 17.0) as i32 % 17,
+                }
+            })
+            .collect();
+        let mut unary = vec![-1.0; n * NUM_LABELS];
+        let mut skipped = vec![u32::MAX; n];
+        let held = HeldLabels {
+            labels: &labels,
+            slack: &slack,
+            skipped: &mut skipped,
+        };
+        unary_costs_for_labels(&model, &points, &pose, &config, tau, held, &mut unary);
+        let cap = config.point_cost(tau).cap();
+        let mut n_skipped = 0;
+        for i in 0..n {
+            let own = exact[i * NUM_LABELS + labels[i] as usize];
+            for k in 0..NUM_LABELS {
+                let (got, want) = (unary[i * NUM_LABELS + k], exact[i * NUM_LABELS + k]);
+                if skipped[i] >> k & 1 == 1 {
+                    n_skipped += 1;
+                    assert!(k != labels[i] as usize && k < NUM_SEGMENTS);
+                    assert_eq!(got, cap);
+                    assert!(want - own > slack[i], "point {i} segment {k}: {want} {own}");
+                } else {
+                    assert!(
+                        (got - want).abs() <= 1e-12 * want.max(1.0),
+                        "{i} {k}: {got} {want}"
+                    );
+                }
+            }
+        }
+        assert!(n_skipped > n, "the skipping is exercised: {n_skipped}");
+        // Points moved to a skipped segment get its exact term back.
+        let moved: Vec<i32> = (0..n)
+            .map(|i| match skipped[i].trailing_zeros() {
+                k if k < NUM_SEGMENTS as u32 => k as i32,
+                _ => labels[i],
+            })
+            .collect();
+        let settled = settle_unary(
+            &model,
+            &points,
+            &pose,
+            &config,
+            tau,
+            &moved,
+            &mut unary,
+            &mut skipped,
+        );
+        assert_eq!(
+            settled,
+            moved.iter().zip(&labels).filter(|(a, b)| a != b).count()
+        );
+        for (i, &l) in moved.iter().enumerate() {
+            let k = i * NUM_LABELS + l as usize;
+            assert!((unary[k] - exact[k]).abs() <= 1e-12 * exact[k].max(1.0));
+            assert_eq!(skipped[i] >> l & 1, 0);
         }
     }
 }
