@@ -335,12 +335,17 @@ fn unary_chunk(
     let cap = pc.cap();
     let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
     let buf = to_f64(pts, &mut buf);
-    let mut near_buf = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
     // Per point: its label (none: −1) and the most another label may cost and still be
     // within the expansion's reach.
     let mut own = [-1i32; CHUNK_POINTS];
     let mut reach = [f64::INFINITY; CHUNK_POINTS];
     let mut skipped: &mut [u32] = &mut [];
+    // Every segment's term starts at the cap (a whole row at a time); the own label's
+    // and the near points' exact costs overwrite it below.
+    for row in u.chunks_exact_mut(NUM_LABELS) {
+        row[..NUM_SEGMENTS].fill(cap);
+        row[NUM_SEGMENTS] = outlier;
+    }
     if let Some((labels, slack, sk)) = held {
         own[..labels.len()].copy_from_slice(labels);
         sk.fill(0);
@@ -391,6 +396,7 @@ fn unary_chunk(
     }
     let mut local = [[0.0f64; CHUNK_POINTS]; 3];
     let mut beyond = [false; CHUNK_POINTS];
+    let mut near = [0u16; CHUNK_POINTS];
     for (k, e) in geo.segments.iter().enumerate() {
         // A lower bound of the distance at or beyond the truncation means the cost is
         // the cap, exactly what the exact distance would give; only the points nearer
@@ -402,37 +408,33 @@ fn unary_chunk(
             [&mut l0[..n], &mut l1[..n], &mut l2[..n]],
             &mut beyond[..n],
         );
-        // The far points cost the cap; the near ones, in order, go to the exact
-        // distance (the own label's term is already there).
+        // The near points, in order, go to the exact distance (the far ones keep the
+        // cap, the own label's term is there already).
         let mut m = 0;
         for i in 0..n {
-            let mine = own[i] == k as i32;
-            let cell = &mut u[i * NUM_LABELS + k];
-            *cell = if mine { *cell } else { cap };
-            near_buf[m] = (i, [local[0][i], local[1][i], local[2][i]]);
-            m += usize::from(!beyond[i] && !mine);
+            near[m] = i as u16;
+            m += usize::from(!beyond[i] && own[i] != k as i32);
         }
         if known {
             // Also the points whose cost is certainly beyond reach.
             let mut kept = 0;
             for j in 0..m {
-                let (i, y) = near_buf[j];
+                let i = near[j] as usize;
+                let y = [local[0][i], local[1][i], local[2][i]];
                 if pc.cost(e.distance_lower_bound(&y)) > reach[i] {
-                    u[i * NUM_LABELS + k] = cap;
                     skipped[i] |= 1 << k;
                 } else {
-                    near_buf[kept] = near_buf[j];
+                    near[kept] = near[j];
                     kept += 1;
                 }
             }
             m = kept;
         }
-        e.signed_distances_batched(near_buf[..m].iter().copied(), |i, d| {
-            u[i * NUM_LABELS + k] = pc.cost(d)
+        let items = near[..m].iter().map(|&i| {
+            let i = i as usize;
+            (i, [local[0][i], local[1][i], local[2][i]])
         });
-    }
-    for row in u.chunks_exact_mut(NUM_LABELS) {
-        row[NUM_SEGMENTS] = outlier;
+        e.signed_distances_batched(items, |i, d| u[i * NUM_LABELS + k] = pc.cost(d));
     }
 }
 
