@@ -4,7 +4,9 @@
 use criterion::{criterion_group, criterion_main, Criterion};
 use depthpose::body::{param, BodyModel, Pose};
 use depthpose::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
-use depthpose::fit::em::{hard_em, unary_costs, EmConfig, NUM_LABELS};
+use depthpose::fit::em::{
+    hard_em, unary_costs, unary_costs_for_labels, EmConfig, HeldLabels, NUM_LABELS,
+};
 use depthpose::fit::lm::{PoseObjective, N, NN};
 use depthpose::fit::objective::{Loss, PointCost, PointObjective};
 use depthpose::fit::{fit_pose, FitConfig};
@@ -78,13 +80,33 @@ fn bench(c: &mut Criterion) {
             )
         })
     });
+    // The same for an E-step from the fit's labels: only the terms its expansion can
+    // use (see `unary_costs_for_labels`).
     let weights = vec![0.5; graph.len()];
-    let mut solver = CrfSolver::<f64>::new(cloud.len(), &graph.edges).unwrap();
+    let mut slack = vec![0.0; cloud.len()];
+    for (&[i, j], &w) in graph.edges.iter().zip(&weights) {
+        slack[i as usize] += w;
+        slack[j as usize] += w;
+    }
     let labels0: Vec<i32> = r
         .labels
         .iter()
         .map(|&l| if l < 0 { 16 } else { l })
         .collect();
+    let mut pruned = vec![0.0; cloud.len() * NUM_LABELS];
+    let mut skipped = vec![0u32; cloud.len()];
+    g.bench_function("unary_costs_from_labels", |b| {
+        b.iter(|| {
+            let held = HeldLabels {
+                labels: &labels0,
+                slack: &slack,
+                skipped: &mut skipped,
+            };
+            let pose = black_box(&truth);
+            unary_costs_for_labels(&model, &cloud.points, pose, &cfg, 0.1, held, &mut pruned)
+        })
+    });
+    let mut solver = CrfSolver::<f64>::new(cloud.len(), &graph.edges).unwrap();
     g.bench_function("e_step_expansion_warm", |b| {
         b.iter(|| {
             let p = CrfProblem {
