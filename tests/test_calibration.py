@@ -126,6 +126,8 @@ def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
         ("final_stride", 9),
         ("finals", 0),
         ("finals", 2.5),
+        ("final_iterations", 0),
+        ("final_iterations", 3.5),
     ],
 )
 def test_nonsense_calibration_settings_are_rejected(field, value):

@@ -270,5 +270,9 @@ def test_more_finals_never_explain_the_depth_worse(side_walk, templates):
             assert res.discrepancy == pytest.approx(
                 est.discrepancy(res.pose, depth, est._mask(depth, None))
             )
+            # The kept final ran at most final_iterations EM iterations in all, and
+            # it is labelled at every pixel (not only on its stride-2 grid).
+            assert 1 <= res.iterations <= est.config.final_iterations
+            assert np.any(res.labels[1::2, 1::2] >= 0)
             scores.append(res.discrepancy)
         assert scores[0] >= scores[1] >= scores[2], scores

@@ -63,6 +63,11 @@ class PipelineConfig:
     #: fully, in parallel, and the best of those kept. More finals is more accurate
     #: (docs/pipeline.md) and, beyond the number of cores, slower.
     finals: int = 3
+    #: EM iterations of each final, the candidate iterations included (None: the
+    #: ``fit`` settings' ``max_iterations``, 20). The finals' accuracy on the shared
+    #: sequences was the same from 8 to 20 (scratch 70.3–71.7 mm, PCK 0.873–0.878) and
+    #: 10 cuts the long tail of finals that would run on (docs/pipeline.md, session 13).
+    final_iterations: int | None = 10
     #: Pixel stride (``FitConfig``'s ``stride``) of those brief candidate fits. At 2 a
     #: brief fit costs about a seventh of one at 1, so all the hypotheses can be tried
     #: (docs/pipeline.md, session 9).
@@ -144,6 +149,8 @@ class PipelineConfig:
         count("hypotheses", 0)
         count("finals", 1)
         count("candidate_iterations", 1)
+        if self.final_iterations is not None:
+            count("final_iterations", 1)
         count("track_iterations", 1)
         for name in ("track_stride", "candidate_stride", "final_stride"):
             count(name, 1)
@@ -486,6 +493,7 @@ class PoseEstimator:
             mask,
             [f.pose for f in winners],
             resume=winners,
+            iterations=self.config.final_iterations,
             stride=self.config.final_stride,
             brief=True,
         )
