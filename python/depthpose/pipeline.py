@@ -751,10 +751,11 @@ class PoseTracker:
                     label=False,
                 )
                 margin = 0.0 if lost else cfg.switch_margin
-                if best_score < score * (1.0 - margin):
+                switch = best_score < score * (1.0 - margin)
+                if switch:
                     best = est.label_all(depth, m, best)
                 t2["search"] = time.perf_counter()
-                if best_score < score * (1.0 - margin):
+                if switch:
                     timings = res.timings
                     timings["search"] = _stage_times(t2)["total"]
                     timings["total"] += timings["search"]

@@ -452,23 +452,25 @@ pub fn settle_unary(
     unary: &mut [f64],
     skipped: &mut [u32],
 ) -> usize {
-    let pending: Vec<usize> = (0..labels.len())
-        .filter(|&i| (0..OUTLIER).contains(&labels[i]) && skipped[i] >> labels[i] & 1 == 1)
-        .collect();
-    if pending.is_empty() {
-        return 0;
-    }
-    let geo = PoseGeometry::new(model, pose);
     let pc = config.point_cost(tau);
-    for &i in &pending {
-        let k = labels[i] as usize;
-        let e = &geo.segments[k];
+    // The pose's geometry only once a point needs it (most E-steps have none).
+    let mut geo = None;
+    let mut settled = 0;
+    for (i, &l) in labels.iter().enumerate() {
+        if !(0..OUTLIER).contains(&l) || skipped[i] >> l & 1 == 0 {
+            continue;
+        }
+        let k = l as usize;
+        let e = &geo
+            .get_or_insert_with(|| PoseGeometry::new(model, pose))
+            .segments[k];
         let p = points[i];
         let y = e.local(&[p[0] as f64, p[1] as f64, p[2] as f64]);
         unary[i * NUM_LABELS + k] = pc.cost(e.signed_distance_local(&y));
         skipped[i] &= !(1 << k);
+        settled += 1;
     }
-    pending.len()
+    settled
 }
 
 fn problem<'a>(unary: &'a [f64], edges: &'a [[u32; 2]], weights: &'a [f64]) -> CrfProblem<'a, f64> {

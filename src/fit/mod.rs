@@ -315,7 +315,7 @@ impl FitProblem {
             }
             return Ok(FitResult::from_em(model, em, labels));
         }
-        self.label_every_pixel(model, em, prior)
+        self.label_every_pixel(model, (sub_cloud, sub_cam), em, prior)
     }
 
     /// `result`, a fit of this image at this problem's stride that kept the EM's
@@ -329,9 +329,9 @@ impl FitProblem {
         result: &FitResult,
         prior: Option<&PosePrior>,
     ) -> Result<FitResult> {
-        if self.sub.is_none() {
+        let Some((sub_cloud, sub_cam, _)) = &self.sub else {
             return Ok(result.clone());
-        }
+        };
         let labels = self.resume_labels(result)?;
         // Labels off the sub-sampled pixels (s·r, s·c): labelled at every pixel already.
         let (w, s) = (self.camera.width, self.config.stride);
@@ -354,7 +354,7 @@ impl FitProblem {
             part_counts: result.part_counts,
             outliers: result.outliers,
         };
-        self.label_every_pixel(model, em, prior)
+        self.label_every_pixel(model, (sub_cloud, sub_cam), em, prior)
     }
 
     /// The end of a strided fit with `label_all_pixels`: the EM's result `em` on the
@@ -362,14 +362,11 @@ impl FitProblem {
     fn label_every_pixel(
         &self,
         model: &BodyModel,
+        (sub_cloud, sub_cam): (&Cloud, &Camera),
         em: EmResult,
         prior: Option<&PosePrior>,
     ) -> Result<FitResult> {
         let (cloud, graph, config) = (&self.cloud, &self.graph, &self.config);
-        let Some((sub_cloud, sub_cam, _)) = &self.sub else {
-            let labels = label_image(cloud, &em.labels);
-            return Ok(FitResult::from_em(model, em, labels));
-        };
         let s = config.stride;
         // Then every full-resolution pixel: starting from the label of its sub-sampled
         // pixel (the one at the top-left of its s×s block) or, without one (no reading

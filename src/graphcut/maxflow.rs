@@ -1009,6 +1009,18 @@ impl<C: Capacity> Graph<C> {
     }
 
     fn init_fresh(&mut self) {
+        self.forget_search();
+        for i in 0..self.n {
+            if !self.start_root(i) {
+                self.free_node(i);
+            }
+        }
+        self.active.start_sweep();
+    }
+
+    /// The part of a fresh solve's start shared by [`Self::init_fresh`] and
+    /// [`Self::init_seeded`]: no active nodes, orphans, clock or pending changes.
+    fn forget_search(&mut self) {
         self.active.clear();
         self.orphans.clear();
         self.time = 0;
@@ -1016,49 +1028,34 @@ impl<C: Capacity> Graph<C> {
             self.changed_bits.clear(i as usize);
         }
         self.changed.clear();
-        for i in 0..self.n {
-            let v = &mut self.nodes[i];
-            let tr = v.tr;
-            if tr > C::ZERO {
-                v.parent = TERMINAL;
-                v.tsd = pack_tsd(0, 1);
-                self.active.mark_initial(i);
-            } else if tr < C::ZERO {
-                v.parent = TERMINAL | SINK_BIT;
-                v.tsd = pack_tsd(0, 1);
-                self.active.mark_initial(i);
-            } else {
-                v.parent = FREE;
-                v.tsd = 0;
-            }
-        }
-        self.active.start_sweep();
+    }
+
+    /// A fresh solve's start of node `i`: with a terminal residual it becomes an active
+    /// root of the source or sink tree (returns true); otherwise it is left as it is.
+    #[inline(always)]
+    fn start_root(&mut self, i: usize) -> bool {
+        let v = &mut self.nodes[i];
+        let tr = v.tr;
+        let parent = if tr > C::ZERO {
+            TERMINAL
+        } else if tr < C::ZERO {
+            TERMINAL | SINK_BIT
+        } else {
+            return false;
+        };
+        v.parent = parent;
+        v.tsd = pack_tsd(0, 1);
+        self.active.mark_initial(i);
+        true
     }
 
     /// [`Self::init_fresh`] on a clean graph whose terminal arcs are all at `seeds`:
     /// every other node is already free, so only the seeds are visited. The active
     /// nodes are swept in index order whatever the order of `seeds`.
     fn init_seeded(&mut self, seeds: &[u32]) {
-        self.active.clear();
-        self.orphans.clear();
-        self.time = 0;
-        for &i in &self.changed {
-            self.changed_bits.clear(i as usize);
-        }
-        self.changed.clear();
-        for &iu in seeds {
-            let i = iu as usize;
-            let v = &mut self.nodes[i];
-            let tr = v.tr;
-            if tr > C::ZERO {
-                v.parent = TERMINAL;
-                v.tsd = pack_tsd(0, 1);
-                self.active.mark_initial(i);
-            } else if tr < C::ZERO {
-                v.parent = TERMINAL | SINK_BIT;
-                v.tsd = pack_tsd(0, 1);
-                self.active.mark_initial(i);
-            }
+        self.forget_search();
+        for &i in seeds {
+            self.start_root(i as usize);
         }
         debug_assert!(
             (0..self.n).all(|i| {
