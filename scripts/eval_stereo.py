@@ -8,9 +8,9 @@ the same disparity range and prints a Markdown table:
   ground-truth pixels each method matched (so a sparse method is judged on what it
   matched; density says how much that is);
 - density: share of ground-truth pixels that got a disparity;
-- time: best of ``--repeat`` runs, in seconds per megapixel, as wall-clock time and as
-  CPU time of the process (all threads). On a shared machine the wall time depends on
-  the load; the CPU time much less.
+- time: best of ``--repeat`` runs (the methods take turns), in seconds per megapixel,
+  as wall-clock time and as CPU time of the process (all threads). On a shared machine
+  the wall time depends on the load; the CPU time much less.
 
 SGBM runs in two modes: OpenCV's default (``MODE_SGBM``, single-threaded, 5 paths) and
 ``MODE_SGBM_3WAY`` (3 paths, parallel over rows: OpenCV's fastest SGBM on several
@@ -119,16 +119,24 @@ def score(disp: np.ndarray, gt: np.ndarray, seconds: float, cpu_seconds: float =
     )
 
 
-def timed(fn: Callable[[], np.ndarray], repeat: int) -> tuple[np.ndarray, float, float]:
-    """Output, best wall time and best CPU time (s) over `repeat` runs."""
-    best, best_cpu = float("inf"), float("inf")
-    out = fn()  # warm-up (thread pools, caches)
+def timed(
+    fns: list[Callable[[], np.ndarray]], repeat: int
+) -> list[tuple[np.ndarray, float, float]]:
+    """Output, best wall time and best CPU time (s) over `repeat` runs of each function.
+
+    The functions take turns within each repeat, so a slow phase of a shared machine
+    hits all of them alike instead of whichever happened to run during it.
+    """
+    outs = [fn() for fn in fns]  # warm-up (thread pools, caches)
+    best = [float("inf")] * len(fns)
+    best_cpu = [float("inf")] * len(fns)
     for _ in range(repeat):
-        t0, c0 = time.perf_counter(), time.process_time()
-        out = fn()
-        best = min(best, time.perf_counter() - t0)
-        best_cpu = min(best_cpu, time.process_time() - c0)
-    return out, best, best_cpu
+        for i, fn in enumerate(fns):
+            t0, c0 = time.perf_counter(), time.process_time()
+            outs[i] = fn()
+            best[i] = min(best[i], time.perf_counter() - t0)
+            best_cpu[i] = min(best_cpu[i], time.process_time() - c0)
+    return list(zip(outs, best, best_cpu, strict=True))
 
 
 def ours(pair: Pair, **options: object) -> Callable[[], np.ndarray]:
@@ -166,14 +174,15 @@ def evaluate(root: Path, repeat: int) -> tuple[list[tuple[str, str, Score]], boo
     rows = []
     have_cv = True
     for pair in load_pairs(root):
-        disp, sec, cpu = timed(ours(pair), repeat)
-        rows.append((pair.name, "depthpose GCS", score(disp, pair.gt, sec, cpu)))
+        methods: list[tuple[str, Callable[[], np.ndarray]]] = [("depthpose GCS", ours(pair))]
         for three_way, name in [(False, "OpenCV StereoSGBM"), (True, "OpenCV StereoSGBM 3-way")]:
             run = sgbm(pair, three_way)
             if run is None:
                 have_cv = False
                 break
-            disp, sec, cpu = timed(run, repeat)
+            methods.append((name, run))
+        results = timed([fn for _, fn in methods], repeat)
+        for (name, _), (disp, sec, cpu) in zip(methods, results, strict=True):
             rows.append((pair.name, name, score(disp, pair.gt, sec, cpu)))
     return rows, have_cv
 

@@ -1,7 +1,7 @@
 //! Window correlation between a left and a right image, computed cheaply.
 //!
 //! Both images are normalised once (global mean 0, global standard deviation 1). The
-//! window mean and variance of every pixel come from integral images (Σ I, Σ I²), so a
+//! window mean and variance of every pixel come from box filters of I and I², so a
 //! candidate match (x, y, d) costs only the cross term Σ L·R over the window.
 
 use rayon::prelude::*;
@@ -57,40 +57,63 @@ fn normalised(img: &[f32]) -> Option<Vec<f32>> {
     )
 }
 
-/// Window means and variances from integral images of I and I² (f64, so the box sums
-/// do not lose precision on large images).
+/// Rows of moments computed by one task: each task keeps its own running column sums.
+const MOMENT_ROWS: usize = 32;
+
+/// Window means and variances by box filtering: per task of `MOMENT_ROWS` rows, running
+/// column sums of I and I² over the window's rows (one row added and one dropped per
+/// step), then a sliding sum along the row. f64 sums, so nothing is lost to the running
+/// updates; memory is two rows of sums per task, not two integral images.
 fn moments(img: &[f32], width: usize, height: usize, half: usize, min_var: f32) -> Moments {
-    let stride = width + 1;
-    let mut s1 = vec![0.0f64; stride * (height + 1)];
-    let mut s2 = vec![0.0f64; stride * (height + 1)];
-    for y in 0..height {
-        let (mut r1, mut r2) = (0.0f64, 0.0f64);
-        for x in 0..width {
-            let v = img[y * width + x] as f64;
-            r1 += v;
-            r2 += v * v;
-            s1[(y + 1) * stride + x + 1] = s1[y * stride + x + 1] + r1;
-            s2[(y + 1) * stride + x + 1] = s2[y * stride + x + 1] + r2;
-        }
-    }
     let side = 2 * half + 1;
     let inv_n = 1.0 / (side * side) as f64;
     let mut mv = vec![[0.0f32; 2]; width * height];
     if width < side || height < side {
         return Moments { mv };
     }
-    mv.par_chunks_mut(width)
+    let pixel = |y: usize, x: usize| img[y * width + x] as f64;
+    mv.par_chunks_mut(width * MOMENT_ROWS)
         .enumerate()
-        .filter(|(y, _)| *y >= half && *y + half < height)
-        .for_each(|(y, row)| {
-            let (top, bottom) = ((y - half) * stride, (y + half + 1) * stride);
-            for (x, slot) in row.iter_mut().enumerate().take(width - half).skip(half) {
-                let (l, r) = (x - half, x + half + 1);
-                let box_sum = |s: &[f64]| s[bottom + r] - s[bottom + l] - s[top + r] + s[top + l];
-                let m = box_sum(&s1) * inv_n;
-                let v = (box_sum(&s2) * inv_n - m * m).max(0.0);
-                // Untextured windows get variance 0: they are never matched.
-                *slot = [m as f32, if v as f32 >= min_var { v as f32 } else { 0.0 }];
+        .for_each(|(task, out)| {
+            let first = (task * MOMENT_ROWS).max(half);
+            let end = (task * MOMENT_ROWS + out.len() / width).min(height - half);
+            if first >= end {
+                return;
+            }
+            // Column sums over rows first − half ..= first + half.
+            let (mut c1, mut c2) = (vec![0.0f64; width], vec![0.0f64; width]);
+            for y in first - half..=first + half {
+                for x in 0..width {
+                    let v = pixel(y, x);
+                    c1[x] += v;
+                    c2[x] += v * v;
+                }
+            }
+            for y in first..end {
+                if y > first {
+                    let (add, drop) = (y + half, y - half - 1);
+                    for x in 0..width {
+                        let (a, d) = (pixel(add, x), pixel(drop, x));
+                        c1[x] += a - d;
+                        c2[x] += a * a - d * d;
+                    }
+                }
+                let row = &mut out[(y - task * MOMENT_ROWS) * width..][..width];
+                let (mut s1, mut s2) = (0.0f64, 0.0f64);
+                for x in 0..side - 1 {
+                    s1 += c1[x];
+                    s2 += c2[x];
+                }
+                for x in half..width - half {
+                    s1 += c1[x + half];
+                    s2 += c2[x + half];
+                    let m = s1 * inv_n;
+                    let v = (s2 * inv_n - m * m).max(0.0);
+                    // Untextured windows get variance 0: they are never matched.
+                    row[x] = [m as f32, if v as f32 >= min_var { v as f32 } else { 0.0 }];
+                    s1 -= c1[x - half];
+                    s2 -= c2[x - half];
+                }
             }
         });
     Moments { mv }
@@ -195,6 +218,44 @@ impl Correlator {
             };
         }
         out
+    }
+
+    /// Correlations of the left window at (x, y) with the right windows at every
+    /// disparity 0..=top, into `out` (resized to top + 1): the exhaustive search of a
+    /// seed. Needs (x, y) inside and top ≤ [`Correlator::max_disparity_at`]`(x)`.
+    pub fn score_line(&self, x: usize, y: usize, top: usize, out: &mut Vec<f32>) {
+        let (w, h) = (self.width, self.half);
+        let side = 2 * h + 1;
+        out.clear();
+        out.resize(top + 1, 0.0);
+        let il = y * w + x;
+        let [ml, vl] = self.ml.mv[il];
+        if vl == 0.0 {
+            out.fill(NO_CORRELATION);
+            return;
+        }
+        // out[e] sums L·R for disparity top − e: the right windows of consecutive e are
+        // consecutive, so each left pixel of the window adds one contiguous
+        // multiply-add over the whole line, which vectorises.
+        for row in y - h..=y + h {
+            let left = &self.left[row * w + x - h..][..side];
+            let right = row * w + x - h - top;
+            for (i, &l) in left.iter().enumerate() {
+                let r = &self.right[right + i..][..top + 1];
+                for (acc, &rv) in out.iter_mut().zip(r) {
+                    *acc += l * rv;
+                }
+            }
+        }
+        out.reverse();
+        for (d, slot) in out.iter_mut().enumerate() {
+            let [mr, vr] = self.mr.mv[il - d];
+            *slot = if vr == 0.0 {
+                NO_CORRELATION
+            } else {
+                self.similarity_of(*slot * self.inv_n - ml * mr, vl, vr)
+            };
+        }
     }
 
     #[inline]
@@ -358,6 +419,34 @@ mod tests {
                         (got - want).abs() < 1e-4,
                         "{sim:?} h={half} ({x},{y},{d}): {got} vs {want}"
                     );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn box_filter_moments_match_the_definition_across_task_borders() {
+        // Taller than two tasks of MOMENT_ROWS rows, so running sums restart twice.
+        let (w, h) = (19, 2 * MOMENT_ROWS + 11);
+        let img = noise(w * h, 6);
+        for half in [1, 2, 3] {
+            let m = moments(&img, w, h, half, 1e-6);
+            for y in 0..h {
+                for x in 0..w {
+                    let [mean, var] = m.mv[y * w + x];
+                    if x < half || y < half || x + half >= w || y + half >= h {
+                        assert_eq!([mean, var], [0.0, 0.0], "border ({x},{y})");
+                        continue;
+                    }
+                    let window: Vec<f64> = (y - half..=y + half)
+                        .flat_map(|yy| (x - half..=x + half).map(move |xx| (yy, xx)))
+                        .map(|(yy, xx)| img[yy * w + xx] as f64)
+                        .collect();
+                    let n = window.len() as f64;
+                    let want_mean = window.iter().sum::<f64>() / n;
+                    let want_var = window.iter().map(|v| (v - want_mean).powi(2)).sum::<f64>() / n;
+                    assert!((mean as f64 - want_mean).abs() < 1e-6, "mean ({x},{y})");
+                    assert!((var as f64 - want_var).abs() < 1e-6, "var ({x},{y})");
                 }
             }
         }

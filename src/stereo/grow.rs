@@ -7,7 +7,7 @@
 //! from. A popped candidate is accepted only when its left and its right pixel are both
 //! still free (uniqueness), so the disparity space is sampled only around surfaces.
 
-use super::correlation::{Correlator, NO_CORRELATION};
+use super::correlation::Correlator;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -116,20 +116,7 @@ pub fn search_line(
     scores: &mut Vec<f32>,
 ) -> Option<(usize, f32)> {
     let top = max_d.min(corr.max_disparity_at(x));
-    scores.clear();
-    scores.resize(top + 1, NO_CORRELATION);
-    if top == 0 {
-        scores[0] = corr.score(x, y, 0);
-    }
-    // Three disparities per pass over the left window: d − 1, d, d + 1 for d = 1, 4, ….
-    // The last pass may centre on top + 1 (scored as NO_CORRELATION, then dropped).
-    for d in (1..=top + 1).step_by(3) {
-        for (k, c) in corr.score3(x, y, d, top).into_iter().enumerate() {
-            if let Some(slot) = scores.get_mut(d + k - 1) {
-                *slot = c;
-            }
-        }
-    }
+    corr.score_line(x, y, top, scores);
     let (best_d, best) =
         scores
             .iter()
@@ -199,6 +186,11 @@ pub const DISPARITY_LIMIT: usize = i16::MAX as usize;
 #[derive(Clone, Copy)]
 struct Cache {
     cached_d: u16,
+    /// The disparity of this pixel's latest candidate in the queue (`NOT_CACHED` when
+    /// none was pushed). While the pixel is unmatched and that disparity is still the
+    /// best free one, the candidate is still pending, so pushing it again would only
+    /// add a pop that is rejected.
+    pushed_d: u16,
     scores: [f32; 3],
 }
 
@@ -206,6 +198,7 @@ const NO_MATCH: i16 = -1;
 const NOT_CACHED: u16 = u16::MAX;
 const EMPTY_CACHE: Cache = Cache {
     cached_d: NOT_CACHED,
+    pushed_d: NOT_CACHED,
     scores: [0.0; 3],
 };
 
@@ -313,7 +306,8 @@ impl Grower {
                         best_d = nd;
                     }
                 }
-                if best >= threshold {
+                if best >= threshold && cell.pushed_d != best_d as u16 {
+                    cell.pushed_d = best_d as u16;
                     self.queue.push(Candidate {
                         idx: nidx as u32,
                         d: best_d as u32,

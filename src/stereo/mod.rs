@@ -5,7 +5,7 @@
 //! Convention: the images are rectified; left pixel (x, y) matches right pixel
 //! (x − d, y) with d ≥ 0. Unmatched pixels get NaN.
 //!
-//! Stages: (1) window moments of both images from integral images, (2) random seeds
+//! Stages: (1) window moments of both images from box filters, (2) random seeds
 //! matched by exhaustive search along the epipolar line (plus user seeds), (3) growing
 //! from the seeds with a priority queue and the uniqueness constraint, testing only
 //! d − 1, d, d + 1 for each 4-neighbour, (4) optional left–right check, (5) subpixel
