@@ -40,21 +40,20 @@ pub struct Correlator {
     similarity: Similarity,
 }
 
-/// `img` shifted and scaled to mean 0 and standard deviation 1; `None` when the image
-/// is uniform (no texture anywhere).
-fn normalised(img: &[f32]) -> Option<Vec<f32>> {
+/// Shifts and scales `img` in place to mean 0 and standard deviation 1; false (and `img`
+/// unspecified) when the image is uniform (no texture anywhere).
+fn normalise(img: &mut [f32]) -> bool {
     let n = img.len() as f64;
     let mean = img.iter().map(|&v| v as f64).sum::<f64>() / n;
     let var = img.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n;
     if var.is_nan() || var <= 0.0 {
-        return None;
+        return false;
     }
     let inv_sd = 1.0 / var.sqrt();
-    Some(
-        img.iter()
-            .map(|&v| ((v as f64 - mean) * inv_sd) as f32)
-            .collect(),
-    )
+    for v in img.iter_mut() {
+        *v = ((*v as f64 - mean) * inv_sd) as f32;
+    }
+    true
 }
 
 /// Rows of moments computed by one task: each task keeps its own running column sums.
@@ -120,10 +119,8 @@ fn moments(img: &[f32], width: usize, height: usize, half: usize, min_var: f32) 
 }
 
 impl Correlator {
-    /// Prepares a pair of `height`×`width` images for windows of `2·half + 1` pixels.
-    /// Windows whose standard deviation is below `min_texture` (in units of the image's
-    /// global standard deviation) are never matched. `None` when either image is
-    /// uniform.
+    /// [`Correlator::from_images`] on copies of borrowed images (for the tests).
+    #[cfg(test)]
     pub fn new(
         left: &[f32],
         right: &[f32],
@@ -133,8 +130,27 @@ impl Correlator {
         min_texture: f32,
         similarity: Similarity,
     ) -> Option<Self> {
-        let (left, right) = rayon::join(|| normalised(left), || normalised(right));
-        let (left, right) = (left?, right?);
+        let (left, right) = (left.to_vec(), right.to_vec());
+        Self::from_images(left, right, width, height, half, min_texture, similarity)
+    }
+
+    /// Prepares a pair of `height`×`width` images (taken by value: they are normalised
+    /// in place) for windows of `2·half + 1` pixels. Windows whose standard deviation is
+    /// below `min_texture` (in units of the image's global standard deviation) are never
+    /// matched. `None` when either image is uniform.
+    pub fn from_images(
+        mut left: Vec<f32>,
+        mut right: Vec<f32>,
+        width: usize,
+        height: usize,
+        half: usize,
+        min_texture: f32,
+        similarity: Similarity,
+    ) -> Option<Self> {
+        let (l_ok, r_ok) = rayon::join(|| normalise(&mut left), || normalise(&mut right));
+        if !(l_ok && r_ok) {
+            return None;
+        }
         let min_var = (min_texture * min_texture).max(f32::MIN_POSITIVE);
         let (ml, mr) = rayon::join(
             || moments(&left, width, height, half, min_var),
@@ -378,8 +394,8 @@ mod tests {
         d: usize,
         sim: Similarity,
     ) -> f64 {
-        let nl = normalised(l).unwrap();
-        let nr = normalised(r).unwrap();
+        let (mut nl, mut nr) = (l.to_vec(), r.to_vec());
+        assert!(normalise(&mut nl) && normalise(&mut nr));
         let mut a = Vec::new();
         let mut b = Vec::new();
         for yy in y - half..=y + half {

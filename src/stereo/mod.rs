@@ -251,20 +251,15 @@ pub fn match_stereo_seeded(
             ..*s
         })
         .collect();
-    let mut res = match_padded(
-        &left,
-        &right,
+    match_padded(
+        left,
+        right,
         height + 2 * half,
         width,
         config,
         max_d,
         &padded,
-    )?;
-    let rows = half * width..(half + height) * width;
-    res.disparity = res.disparity[rows.clone()].to_vec();
-    res.confidence = res.confidence[rows].to_vec();
-    res.height = height;
-    Ok(res)
+    )
 }
 
 /// `img` (row-major `height`×`width`) with `pad` rows above and below, reflected about
@@ -282,10 +277,11 @@ fn pad_rows(img: &[f32], width: usize, height: usize, pad: usize) -> Vec<f32> {
     out
 }
 
-/// [`match_stereo_seeded`] on validated, row-padded images.
+/// [`match_stereo_seeded`] on validated images padded with `config.window / 2` rows
+/// above and below; the result leaves the padding rows out.
 fn match_padded(
-    left: &[f32],
-    right: &[f32],
+    left: Vec<f32>,
+    right: Vec<f32>,
     height: usize,
     width: usize,
     config: &StereoConfig,
@@ -293,8 +289,14 @@ fn match_padded(
     seeds: &[Seed],
 ) -> Result<StereoResult> {
     let half = config.window / 2;
-
-    let Some(corr) = Correlator::new(
+    let flip = |img: &[f32]| -> Vec<f32> {
+        img.chunks_exact(width)
+            .flat_map(|row| row.iter().rev().copied())
+            .collect()
+    };
+    // The right image, mirrored, is a left image for the mirrored left image.
+    let mirrored = config.lr_check.then(|| (flip(&right), flip(&left)));
+    let Some(corr) = Correlator::from_images(
         left,
         right,
         width,
@@ -303,21 +305,16 @@ fn match_padded(
         config.min_texture,
         config.similarity,
     ) else {
-        return Ok(StereoResult::empty(height, width)); // a uniform image: no texture
+        // A uniform image: no texture.
+        return Ok(StereoResult::empty(height - 2 * half, width));
     };
     let user: Vec<(usize, usize, usize)> = seeds.iter().map(|s| (s.x, s.y, s.d)).collect();
     let (mut disp_int, seeds_used, growers) = grow_pass(&corr, config, max_d, &user);
 
-    if config.lr_check {
-        let flip = |img: &[f32]| -> Vec<f32> {
-            img.chunks_exact(width)
-                .flat_map(|row| row.iter().rev().copied())
-                .collect()
-        };
-        // The right image, mirrored, is a left image for the mirrored left image.
-        let back = Correlator::new(
-            &flip(right),
-            &flip(left),
+    if let Some((left_back, right_back)) = mirrored {
+        let back = Correlator::from_images(
+            left_back,
+            right_back,
             width,
             height,
             half,
@@ -336,14 +333,17 @@ fn match_padded(
     }
 
     // Confidence = correlation at d; subpixel offset from d − 1, d, d + 1 (cached).
-    let mut disparity = vec![f32::NAN; width * height];
-    let mut confidence = vec![f32::NAN; width * height];
+    // Only the rows between the padding are written out.
+    let out_height = height - 2 * half;
+    let mut disparity = vec![f32::NAN; width * out_height];
+    let mut confidence = vec![f32::NAN; width * out_height];
     disparity
         .par_chunks_mut(width)
         .zip(confidence.par_chunks_mut(width))
-        .zip(disp_int.par_chunks(width))
+        .zip(disp_int[half * width..].par_chunks(width))
         .enumerate()
-        .for_each(|(y, ((drow, crow), irow))| {
+        .for_each(|(row, ((drow, crow), irow))| {
+            let y = row + half;
             for (x, ((dv, cv), &d)) in drow.iter_mut().zip(crow).zip(irow).enumerate() {
                 if d == UNMATCHED {
                     continue;
@@ -363,7 +363,7 @@ fn match_padded(
     Ok(StereoResult {
         disparity,
         confidence,
-        height,
+        height: out_height,
         width,
         seeds_used,
     })
