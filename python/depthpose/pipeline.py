@@ -445,14 +445,15 @@ class PoseEstimator:
         if not cands:
             raise NoBodyError("depth: no template matched the foreground")
         out: list[np.ndarray] = []
-        seen: list[np.ndarray] = []
+        seen = np.empty((4 * len(cands), 15, 3))  # joints of the poses kept so far
         for c in cands:
             p = np.asarray(c.pose, np.float64)
             for q in (p, swap_limbs(p), mirror_view(p), mirror_view(swap_limbs(p))):
                 j = np.asarray(self.model.joints(q))
-                if any(np.linalg.norm(j - s, axis=1).mean() < 0.03 for s in seen):
+                kept = seen[: len(out)]
+                if len(out) and (np.linalg.norm(kept - j, axis=2).mean(axis=1) < 0.03).any():
                     continue
-                seen.append(j)
+                seen[len(out)] = j
                 out.append(q)
         return out
 
@@ -467,10 +468,12 @@ class PoseEstimator:
         starts = self.hypotheses(depth, mask)
         if timings is not None:
             timings["templates"] = time.perf_counter()
-        order = np.argsort(self.discrepancies(starts, depth, mask), kind="stable")
-        ranked = [starts[i] for i in order]
-        n = self.config.hypotheses if hypotheses is None else hypotheses
-        chosen = [*list(extra), *ranked[: max(1, n)]]
+        n = max(1, self.config.hypotheses if hypotheses is None else hypotheses)
+        if n < len(starts):
+            order = np.argsort(self.discrepancies(starts, depth, mask), kind="stable")
+            starts = [starts[i] for i in order[:n]]
+        # (When all are refined, ranking them first would only reorder the fits.)
+        chosen = [*list(extra), *starts]
         # Candidates continued at their own stride need no labels beyond their EM's.
         brief = self.config.candidate_stride == self.config.final_stride
         fits = self._fits(
