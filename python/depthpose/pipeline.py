@@ -459,9 +459,9 @@ class PoseEstimator:
 
     def search(self, depth, mask, *, extra=(), timings=None, hypotheses=None, label=True):
         """Best fit from the template hypotheses (and ``extra`` start poses, always
-        refined): all ranked by their depth discrepancy, the best ``hypotheses`` (default
-        ``config.hypotheses``) refined
-        briefly by EM (in parallel), the ``finals`` explaining the depth best refined
+        refined): the best ``hypotheses`` (default ``config.hypotheses``) by their depth
+        discrepancy (no ranking when that is all of them) refined briefly by EM (in
+        parallel), the ``finals`` explaining the depth best refined
         fully (their EM continued, in parallel), the best of all kept. Returns the fit and
         its discrepancy. ``label=False``: a final comes back with the labels of its EM
         only (at every ``final_stride``-th pixel); :meth:`label_all` completes it."""
