@@ -483,6 +483,41 @@ fn tall_images_grow_in_bands_without_seams() {
 }
 
 #[test]
+fn result_does_not_depend_on_the_thread_count() {
+    // Bands are fixed in size and grown independently, so one thread and several give
+    // the same disparities and confidences bit for bit, left–right check included.
+    let (w, h) = (70, 2 * BAND_ROWS + 40);
+    let (left, right, _, _) = random_dots(w, h, 4, 9, (20, 30, 50, BAND_ROWS + 20));
+    for lr_check in [false, true] {
+        let cfg = StereoConfig {
+            max_disparity: Some(14),
+            num_seeds: 80,
+            lr_check,
+            ..Default::default()
+        };
+        let run = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| match_stereo(&left, &right, h, w, &cfg).unwrap())
+        };
+        let one = run(1);
+        assert!(one.matched() * 2 > w * h, "lr_check {lr_check}: too sparse");
+        for threads in [2, 3] {
+            let many = run(threads);
+            let same = |a: &[f32], b: &[f32]| {
+                a.iter()
+                    .zip(b)
+                    .all(|(p, q)| p.to_bits() == q.to_bits() || (p.is_nan() && q.is_nan()))
+            };
+            assert!(same(&one.disparity, &many.disparity), "{threads} threads");
+            assert!(same(&one.confidence, &many.confidence), "{threads} threads");
+        }
+    }
+}
+
+#[test]
 fn top_and_bottom_rows_are_matched_through_reflected_padding() {
     // Rows within half a window of the top and bottom have their windows completed by
     // reflection (the same rows in both images), so they are matched correctly too.
