@@ -317,22 +317,29 @@ impl BodyModel {
         // Per row, the columns of the observed pixels; outside them and outside the
         // rendered silhouettes a pixel adds nothing, so each pose visits only those
         // columns (same sums, in the same order, as `depth_discrepancy` on a full
-        // rendering).
+        // rendering). One counting pass per row (branch-free, so it vectorises) finds
+        // the rows with observed pixels; only those are searched for their ends.
         let w = camera.width;
+        let mut n_observed = 0usize;
         let observed_cols: Vec<Option<(usize, usize)>> = depth
             .chunks(w)
             .zip(mask.chunks(w))
             .map(|(d, m)| {
+                // `observed`, written so it vectorises: NaN fails both comparisons.
+                let count: u32 = d
+                    .iter()
+                    .zip(m)
+                    .map(|(&z, &inside)| (inside & (z > 0.0) & (z < f32::INFINITY)) as u32)
+                    .sum();
+                n_observed += count as usize;
+                if count == 0 {
+                    return None;
+                }
                 let obs = |c: &usize| observed(d[*c], m[*c]);
                 let lo = (0..w).find(obs)?;
                 Some((lo, (0..w).rfind(obs).unwrap_or(lo)))
             })
             .collect();
-        let n_observed = depth
-            .iter()
-            .zip(mask)
-            .filter(|(&d, &m)| observed(d, m))
-            .count();
         if n_observed == 0 {
             return Ok(vec![f64::INFINITY; poses.len()]);
         }
