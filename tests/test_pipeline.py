@@ -26,6 +26,43 @@ def wave():
     return seq, cam, seq["background"].astype(np.float32) / 1000
 
 
+def test_joint_confidence_is_the_labelled_share_of_each_joints_parts(wave):
+    # Against the definition, joint by joint: labelled pixels of the joint's parts over
+    # the pixels of those parts in a render of the pose (capped at 1), 0.3 when none is
+    # rendered, 0 for a joint projecting outside the image.
+    from depthpose.pipeline import _JOINT_PARTS, joint_confidence
+
+    _, cam, _ = wave
+    model = dp.BodyModel()
+    names = list(model.part_names)
+    rng = np.random.default_rng(4)
+    pose = np.asarray(model.neutral_pose())
+    pose[:3] = [0.0, 0.0, 2.5]
+    _, rendered = model.render_depth(pose, cam)
+    far_right = pose.copy()
+    far_right[0] = 1.2  # the body leaves the image on the right
+    for p, labels in [
+        (pose, rendered),
+        (pose, rng.integers(-1, len(names), cam.shape).astype(np.int16)),
+        (pose, np.where(rendered == names.index("head"), -1, rendered).astype(np.int16)),
+        (far_right, rng.integers(-1, len(names), cam.shape).astype(np.int16)),
+    ]:
+        _, drawn = model.render_depth(p, cam)
+        uv = cam.project(model.joints(p))
+        want = np.zeros(15)
+        for j, parts in enumerate(_JOINT_PARTS):
+            ids = [names.index(q) for q in parts if q in names]
+            e = sum(int((drawn == i).sum()) for i in ids)
+            s = sum(int((labels == i).sum()) for i in ids)
+            inside = 0 <= uv[j, 0] < cam.width and 0 <= uv[j, 1] < cam.height
+            want[j] = 0.0 if not inside else (min(1.0, s / e) if e > 0 else 0.3)
+        np.testing.assert_array_equal(joint_confidence(model, p, labels, cam), want)
+    # The branches above were all taken: a joint outside the image (0), and labels
+    # equal to the render explain every joint fully.
+    assert (joint_confidence(model, far_right, rendered, cam) == 0).any()
+    np.testing.assert_array_equal(joint_confidence(model, pose, rendered, cam), np.ones(15))
+
+
 def test_estimate_from_scratch_on_own_model(wave, templates):
     seq, cam, bg = wave
     est = PoseEstimator(cam, templates=templates, background=bg)

@@ -16,6 +16,7 @@ Two people in view: the foreground stage keeps the nearest large body (see
 
 from __future__ import annotations
 
+import functools
 import json
 import time
 from dataclasses import dataclass, field
@@ -299,15 +300,29 @@ def _model(model):
     return BodyModel() if model is None else model
 
 
+@functools.lru_cache(maxsize=8)
+def _joint_part_matrix(part_names: tuple[str, ...]) -> np.ndarray:
+    """(15, parts) 0/1: which of the model's parts belong to each joint's neighbourhood."""
+    m = np.zeros((len(_JOINT_PARTS), len(part_names)), np.int64)
+    for j, parts in enumerate(_JOINT_PARTS):
+        for p in parts:
+            if p in part_names:
+                m[j, part_names.index(p)] = 1
+    m.flags.writeable = False
+    return m
+
+
 def joint_confidence(model, pose, labels: np.ndarray, camera: Camera) -> np.ndarray:
     """Per-joint confidence: the share of the model's visible surface around the joint
     that the data labelled as that part (from a render of the fitted pose), zero for a
     joint outside the image."""
     _, rendered = model.render_depth(pose, camera)
-    names = list(model.part_names)
+    names = tuple(model.part_names)
     n_parts = len(names)
     seen = np.bincount(labels[labels >= 0].ravel(), minlength=n_parts)[:n_parts]
     expect = np.bincount(rendered[rendered >= 0].ravel(), minlength=n_parts)[:n_parts]
+    parts = _joint_part_matrix(names)
+    e, s = parts @ expect, parts @ seen  # integer sums: exact
     joints = model.joints(pose)
     uv = camera.project(joints)
     inside = (
@@ -315,12 +330,8 @@ def joint_confidence(model, pose, labels: np.ndarray, camera: Camera) -> np.ndar
         & (uv[:, 0] >= 0) & (uv[:, 0] < camera.width)
         & (uv[:, 1] >= 0) & (uv[:, 1] < camera.height)
     )  # fmt: skip
-    conf = np.zeros(len(JOINT_NAMES))
-    for j, parts in enumerate(_JOINT_PARTS):
-        idx = [names.index(p) for p in parts if p in names]
-        e = expect[idx].sum()
-        s = seen[idx].sum()
-        conf[j] = min(1.0, s / e) if e > 0 else 0.3  # hidden: only the kinematic chain
+    # A hidden joint (nothing of its parts rendered) gets 0.3: only the kinematic chain.
+    conf = np.where(e > 0, np.minimum(1.0, s / np.maximum(e, 1)), 0.3)
     return np.where(inside, conf, 0.0)
 
 
