@@ -119,26 +119,11 @@ fn moments(img: &[f32], width: usize, height: usize, half: usize, min_var: f32) 
 }
 
 impl Correlator {
-    /// [`Correlator::from_images`] on copies of borrowed images (for the tests).
-    #[cfg(test)]
-    pub fn new(
-        left: &[f32],
-        right: &[f32],
-        width: usize,
-        height: usize,
-        half: usize,
-        min_texture: f32,
-        similarity: Similarity,
-    ) -> Option<Self> {
-        let (left, right) = (left.to_vec(), right.to_vec());
-        Self::from_images(left, right, width, height, half, min_texture, similarity)
-    }
-
     /// Prepares a pair of `height`×`width` images (taken by value: they are normalised
     /// in place) for windows of `2·half + 1` pixels. Windows whose standard deviation is
     /// below `min_texture` (in units of the image's global standard deviation) are never
     /// matched. `None` when either image is uniform.
-    pub fn from_images(
+    pub fn new(
         mut left: Vec<f32>,
         mut right: Vec<f32>,
         width: usize,
@@ -427,7 +412,7 @@ mod tests {
         let r = noise(w * h, 2);
         for sim in [Similarity::Mncc, Similarity::Ncc] {
             for half in [1, 2, 3] {
-                let c = Correlator::new(&l, &r, w, h, half, 1e-3, sim).unwrap();
+                let c = Correlator::new(l.clone(), r.clone(), w, h, half, 1e-3, sim).unwrap();
                 for (x, y, d) in [(10, 8, 0), (15, 5, 7), (19, 13, 3), (half + 4, half, 4)] {
                     let got = c.score(x, y, d) as f64;
                     let want = brute(&l, &r, w, half, x, y, d, sim);
@@ -474,7 +459,8 @@ mod tests {
         let l = noise(w * h, 4);
         let r = noise(w * h, 5);
         for half in 1..=4 {
-            let c = Correlator::new(&l, &r, w, h, half, 1e-3, Similarity::Mncc).unwrap();
+            let c =
+                Correlator::new(l.clone(), r.clone(), w, h, half, 1e-3, Similarity::Mncc).unwrap();
             for (x, y) in [(20, 5), (25, 7), (half, half), (10, 6)] {
                 let top = c.max_disparity_at(x).min(12);
                 for d in 0..=top {
@@ -503,10 +489,12 @@ mod tests {
                 l[y * w + x] = 0.5; // flat block on the left
             }
         }
-        let c = Correlator::new(&l, &l, w, h, 2, 1e-3, Similarity::Mncc).unwrap();
+        let c = Correlator::new(l.clone(), l.clone(), w, h, 2, 1e-3, Similarity::Mncc).unwrap();
         assert!((c.score(12, 5, 0) - 1.0).abs() < 1e-5);
         assert!(!c.left_textured(3, 5));
         assert_eq!(c.score(3, 5, 0), NO_CORRELATION);
-        assert!(Correlator::new(&vec![1.0; w * h], &l, w, h, 2, 1e-3, Similarity::Mncc).is_none());
+        assert!(
+            Correlator::new(vec![1.0; w * h], l.clone(), w, h, 2, 1e-3, Similarity::Mncc).is_none()
+        );
     }
 }

@@ -395,7 +395,8 @@ mod tests {
                 }
             })
             .collect();
-        let corr = Correlator::new(&left, &right, w, h, 2, 0.01, Similarity::Mncc).unwrap();
+        let corr =
+            Correlator::new(left.clone(), right.clone(), w, h, 2, 0.01, Similarity::Mncc).unwrap();
         let mut scratch = Vec::new();
         let (d, c) = search_line(&corr, 40, 4, 30, 0.8, &mut scratch).unwrap();
         assert_eq!(d, shift);
@@ -420,7 +421,7 @@ mod tests {
                 .collect()
         };
         let (a, b) = (stripes(), stripes());
-        let corr = Correlator::new(&a, &b, w, h, 2, 0.01, Similarity::Mncc).unwrap();
+        let corr = Correlator::new(a.clone(), b.clone(), w, h, 2, 0.01, Similarity::Mncc).unwrap();
         assert!(search_line(&corr, 40, 4, 30, 0.8, &mut scratch).is_none());
         assert!(search_line(&corr, 40, 4, 30, 1.0, &mut scratch).is_some());
     }

@@ -296,7 +296,7 @@ fn match_padded(
     };
     // The right image, mirrored, is a left image for the mirrored left image.
     let mirrored = config.lr_check.then(|| (flip(&right), flip(&left)));
-    let Some(corr) = Correlator::from_images(
+    let Some(corr) = Correlator::new(
         left,
         right,
         width,
@@ -312,7 +312,7 @@ fn match_padded(
     let (mut disp_int, seeds_used, growers) = grow_pass(&corr, config, max_d, &user);
 
     if let Some((left_back, right_back)) = mirrored {
-        let back = Correlator::from_images(
+        let back = Correlator::new(
             left_back,
             right_back,
             width,
