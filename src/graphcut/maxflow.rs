@@ -1742,17 +1742,16 @@ mod tests {
         }
     }
 
-    /// A grid large enough for thousands of augmentations, solved with the clock
-    /// restarting every few of them and without restarts: same flow, same cut value.
     /// The pass over short paths before the search is greedy: here it sends a's unit to
-    /// b (a's first arc), which leaves d no short path. The search must then undo part
-    /// of it through the reverse residual of a → b: s → d → b → a → c → t.
+    /// b (a → b is the last edge added, so a's first arc scanned), which leaves d no
+    /// short path. The search must then undo part of it through the reverse residual of
+    /// a → b: s → d → b → a → c → t.
     #[test]
     fn greedy_short_paths_are_rerouted_by_the_search() {
         let (a, b, c, d) = (0, 1, 2, 3);
         let p = Problem {
             n: 4,
-            edges: vec![(a, b, 1, 0), (a, c, 1, 0), (d, b, 1, 0)],
+            edges: vec![(a, c, 1, 0), (d, b, 1, 0), (a, b, 1, 0)],
             terms: vec![(1, 0), (0, 1), (0, 1), (1, 0)],
         };
         let mut g = graph_of(&p);
@@ -1760,16 +1759,18 @@ mod tests {
         assert_eq!(brute_min_cut(&p), 2);
         let side: Vec<bool> = (0..4).map(|i| g.is_sink_side(i)).collect();
         assert_eq!(cut_value(&p, &side), 2);
-        // The maximum flow leaves a → b unused (its unit came back) and saturates
-        // a → c and d → b; every terminal arc is saturated.
-        assert_eq!(g.edge_residual(0), Some((1, 0)));
+        // The maximum flow saturates a → c and d → b and leaves a → b unused (its
+        // unit came back); every terminal arc is saturated.
+        assert_eq!(g.edge_residual(0), Some((0, 1)));
         assert_eq!(g.edge_residual(1), Some((0, 1)));
-        assert_eq!(g.edge_residual(2), Some((0, 1)));
+        assert_eq!(g.edge_residual(2), Some((1, 0)));
         for i in 0..4 {
             assert_eq!(g.terminal_residual(i), 0, "node {i}");
         }
     }
 
+    /// A grid large enough for thousands of augmentations, solved with the clock
+    /// restarting every few of them and without restarts: same flow, same cut value.
     #[test]
     fn clock_restarts_on_a_grid() {
         let (h, w) = (48usize, 64usize);
