@@ -187,13 +187,20 @@ impl BodyModel {
         out.par_chunks_mut(CHUNK_POINTS * NUM_SEGMENTS)
             .zip(points.par_chunks(CHUNK_POINTS))
             .for_each(|(o, pts)| {
-                let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
-                let buf = to_f64(pts, &mut buf);
+                let n = pts.len();
+                let mut soa = [[0.0f64; CHUNK_POINTS]; 3];
+                for (i, p) in pts.iter().enumerate() {
+                    for r in 0..3 {
+                        soa[r][i] = p[r] as f64;
+                    }
+                }
+                let [px, py, pz] = &soa;
+                let mut dist = [0.0f64; CHUNK_POINTS];
                 for (k, e) in geo.segments.iter().enumerate() {
-                    e.signed_distances_batched(
-                        buf.iter().enumerate().map(|(i, p)| (i, e.local(p))),
-                        |i, d| o[i * NUM_SEGMENTS + k] = d as f32,
-                    );
+                    e.signed_distances_camera_soa([px, py, pz], &mut dist[..n]);
+                    for (i, &d) in dist[..n].iter().enumerate() {
+                        o[i * NUM_SEGMENTS + k] = d as f32;
+                    }
                 }
             });
         Ok(())
