@@ -741,35 +741,6 @@ impl SortedPlacement {
         }
     }
 
-    /// Local coordinates ([`Self::local`]) of camera-frame points given one coordinate
-    /// per slice: `local[r][i]` for every `i < local[0].len()`.
-    #[inline]
-    pub fn locals(&self, points: [&[f64]; 3], local: [&mut [f64]; 3]) {
-        let n = local[0].len();
-        let [px, py, pz] = points;
-        let (px, py, pz) = (&px[..n], &py[..n], &pz[..n]);
-        let [l0, l1, l2] = local;
-        let (l0, l1, l2) = (&mut l0[..n], &mut l1[..n], &mut l2[..n]);
-        for i in 0..n {
-            let y = self.local(&[px[i], py[i], pz[i]]);
-            (l0[i], l1[i], l2[i]) = (y[0], y[1], y[2]);
-        }
-    }
-
-    /// Signed distances of many local points given one coordinate per slice: `out[i]`
-    /// for every `i < out.len()`, bit for bit [`Self::signed_distance_local`]. With
-    /// AVX-512 the root-finder runs as a stream of points through the vector lanes
-    /// (module `stream`), else [`LANES`] at a time in lockstep.
-    pub fn signed_distances_soa(&self, y: [&[f64]; 3], out: &mut [f64]) {
-        self.signed_distances_soa_in::<false>(y, out);
-    }
-
-    /// [`Self::signed_distances_soa`] of camera-frame points: bit for bit
-    /// [`Self::signed_distance`].
-    pub fn signed_distances_camera_soa(&self, p: [&[f64]; 3], out: &mut [f64]) {
-        self.signed_distances_soa_in::<true>(p, out);
-    }
-
     /// Signed distances of camera-frame points in single precision, for callers whose
     /// points and results are f32: `out[i]` for every `i < out.len()`. With AVX-512
     /// the stream root-finder runs in f32, 16 lanes to a register (module
@@ -827,31 +798,6 @@ impl SortedPlacement {
         }
     }
 
-    fn signed_distances_soa_in<const CAMERA: bool>(&self, y: [&[f64]; 3], out: &mut [f64]) {
-        #[cfg(target_arch = "x86_64")]
-        if stream::available() {
-            for (b, o) in out.chunks_mut(stream::BLOCK).enumerate() {
-                let at = b * stream::BLOCK;
-                let block = [&y[0][at..], &y[1][at..], &y[2][at..]];
-                // SAFETY: the CPU has AVX-512F and BMI2 (checked just above).
-                unsafe { stream::signed_distances_block::<CAMERA>(self, block, o) };
-            }
-            return;
-        }
-        self.signed_distances_soa_lockstep::<CAMERA>(y, out);
-    }
-
-    /// [`Self::signed_distances_soa_in`] without the stream: [`LANES`] points at a time
-    /// through the lockstep root-finder.
-    fn signed_distances_soa_lockstep<const CAMERA: bool>(&self, y: [&[f64]; 3], out: &mut [f64]) {
-        let n = out.len();
-        let point = |i: usize| {
-            let p = [y[0][i], y[1][i], y[2][i]];
-            (i, if CAMERA { self.local(&p) } else { p })
-        };
-        self.signed_distances_batched((0..n).map(point), |i, d| out[i] = d);
-    }
-
     /// Signed distances of many local points (from [`Self::local`]), [`LANES`] at a time
     /// through the lockstep root-finder: `emit(i, d)` receives each `(i, y)` of `items`
     /// with the same value [`Self::signed_distance_local`] gives (points on a coordinate
@@ -882,10 +828,77 @@ impl SortedPlacement {
     }
 
     /// The first-octant closest point `x` of each local point `y` of `items`:
-    /// `emit(i, y, |y|, x)`, [`LANES`] points at a time through the lockstep root-finder
-    /// (points on a coordinate plane one by one, through the special cases).
+    /// `emit(i, y, |y|, x)`, the values `closest_sorted` gives. With AVX-512 the points
+    /// go through the stream root-finder [`stream::BLOCK`] at a time (module `stream`),
+    /// else [`LANES`] at a time through the lockstep root-finder.
     #[inline]
     fn closest_batched(
+        &self,
+        items: impl Iterator<Item = (usize, [f64; 3])>,
+        emit: impl FnMut(usize, &[f64; 3], &[f64; 3], &[f64; 3]),
+    ) {
+        #[cfg(target_arch = "x86_64")]
+        if stream::available() {
+            self.closest_streamed(items, emit);
+            return;
+        }
+        self.closest_lockstep(items, emit);
+    }
+
+    /// [`Self::closest_batched`] through the stream: the items buffered one coordinate
+    /// per array, a block at a time.
+    #[cfg(target_arch = "x86_64")]
+    fn closest_streamed(
+        &self,
+        items: impl Iterator<Item = (usize, [f64; 3])>,
+        mut emit: impl FnMut(usize, &[f64; 3], &[f64; 3], &[f64; 3]),
+    ) {
+        use stream::BLOCK;
+        // Left uninitialised (zeroing ~14 KB per call would cost more than a short
+        // call's solve); only the entries written are read.
+        let mut index = std::mem::MaybeUninit::<[usize; BLOCK]>::uninit();
+        let mut coords = std::mem::MaybeUninit::<[[f64; BLOCK]; 6]>::uninit();
+        let index = index.as_mut_ptr() as *mut usize;
+        let base = coords.as_mut_ptr() as *mut f64;
+        // SAFETY: the pointers stay inside the two buffers; a block's first m entries
+        // are written before they are read; the CPU has AVX-512F and BMI2 (checked by
+        // the caller).
+        let mut flush = |m: usize| unsafe {
+            let col = |k: usize| std::slice::from_raw_parts_mut(base.add(k * BLOCK), m);
+            let (y, x) = ([col(0), col(1), col(2)], [col(3), col(4), col(5)]);
+            stream::closest_block(self, [&*y[0], &*y[1], &*y[2]], x);
+            let [y0, y1, y2] = y.map(|c| &*c);
+            let (x0, x1, x2) = (col(3), col(4), col(5));
+            for j in 0..m {
+                let yj = [y0[j], y1[j], y2[j]];
+                let ys = [yj[0].abs(), yj[1].abs(), yj[2].abs()];
+                emit(*index.add(j), &yj, &ys, &[x0[j], x1[j], x2[j]]);
+            }
+        };
+        let mut m = 0;
+        for (i, y) in items {
+            // SAFETY: m < BLOCK.
+            unsafe {
+                *index.add(m) = i;
+                for (k, &v) in y.iter().enumerate() {
+                    *base.add(k * BLOCK + m) = v;
+                }
+            }
+            m += 1;
+            if m == BLOCK {
+                flush(m);
+                m = 0;
+            }
+        }
+        if m > 0 {
+            flush(m);
+        }
+    }
+
+    /// [`Self::closest_batched`] through the lockstep root-finder, [`LANES`] points at a
+    /// time (points on a coordinate plane one by one, through the special cases).
+    #[inline]
+    fn closest_lockstep(
         &self,
         items: impl Iterator<Item = (usize, [f64; 3])>,
         mut emit: impl FnMut(usize, &[f64; 3], &[f64; 3], &[f64; 3]),
@@ -1279,12 +1292,12 @@ mod tests {
         eprintln!("AVX2 lanes compared on {compared} groups");
     }
 
-    /// The block distances (the AVX-512 stream where the CPU has it) give bit for bit
-    /// the one-point distances, over ellipsoids from near-spherical to flat, points
-    /// inside, near and far, on coordinate planes and axes, block lengths that are not
-    /// multiples of 8 and runs longer than one block.
+    /// The batched distances and normals (through the AVX-512 stream where the CPU has
+    /// it) and the lockstep ones give bit for bit the one-point values, over ellipsoids
+    /// from near-spherical to flat, points inside, near and far, on coordinate planes
+    /// and axes, batches that are not multiples of 8 and runs longer than one block.
     #[test]
-    fn block_distances_agree_bit_for_bit() {
+    fn batched_closest_points_agree_bit_for_bit() {
         let mut seed = 0x9E37_79B9_7F4A_7C15u64;
         let mut rnd = || {
             seed ^= seed << 13;
@@ -1300,58 +1313,60 @@ mod tests {
             } else if trial % 7 == 1 {
                 radii.y = radii.x; // a spheroid
             }
-            let placed = PlacedEllipsoid {
-                centre: Vector3::zeros(),
-                rotation: Matrix3::identity(),
-                prepared: Prepared::new(&radii),
-            };
-            let fast = SortedPlacement::new(&placed);
-            let n = [1, 7, 8, 9, 100, 256, 257, 700][trial % 8];
-            let scale = [0.01, 0.3, 1.0, 3.0][(rnd() * 4.0) as usize];
-            let mut y = [vec![0.0; n], vec![0.0; n], vec![0.0; n]];
-            for i in 0..n {
-                for c in &mut y {
-                    c[i] = (2.0 * rnd() - 1.0) * scale;
-                }
-                // Some points on coordinate planes and axes, and at the centre.
-                match (rnd() * 12.0) as usize {
-                    0 => y[0][i] = 0.0,
-                    1 => y[1][i] = 0.0,
-                    2 => y[2][i] = 0.0,
-                    3 => (y[0][i], y[1][i]) = (0.0, 0.0),
-                    4 => (y[1][i], y[2][i]) = (0.0, 0.0),
-                    5 => (y[0][i], y[1][i], y[2][i]) = (0.0, 0.0, 0.0),
-                    _ => {}
-                }
-            }
-            let mut out = vec![f64::NAN; n];
-            let mut lockstep = vec![f64::NAN; n];
-            fast.signed_distances_soa([&y[0], &y[1], &y[2]], &mut out);
-            fast.signed_distances_soa_lockstep::<false>([&y[0], &y[1], &y[2]], &mut lockstep);
-            for i in 0..n {
-                let one = fast.signed_distance_local(&[y[0][i], y[1][i], y[2][i]]);
-                assert_eq!(out[i].to_bits(), one.to_bits(), "trial {trial} point {i}");
-                assert_eq!(
-                    lockstep[i].to_bits(),
-                    one.to_bits(),
-                    "trial {trial} point {i}"
-                );
-            }
-            // The same points as camera-frame points of a rotated, shifted ellipsoid.
             let rot = nalgebra::Rotation3::from_euler_angles(rnd() * 3.0, rnd(), rnd() * 2.0);
-            let turned = SortedPlacement::new(&PlacedEllipsoid {
+            let e = SortedPlacement::new(&PlacedEllipsoid {
                 centre: Vector3::new(rnd() - 0.5, rnd() - 0.5, 1.0 + 3.0 * rnd()),
                 rotation: *rot.matrix(),
                 prepared: Prepared::new(&radii),
             });
-            turned.signed_distances_camera_soa([&y[0], &y[1], &y[2]], &mut out);
-            for i in 0..n {
-                let one = turned.signed_distance(&[y[0][i], y[1][i], y[2][i]]);
+            let n = [1, 7, 8, 9, 100, 256, 257, 700][trial % 8];
+            let scale = [0.01, 0.3, 1.0, 3.0][(rnd() * 4.0) as usize];
+            let mut local = vec![[0.0; 3]; n];
+            for y in local.iter_mut() {
+                *y = [0.0; 3].map(|_| (2.0 * rnd() - 1.0) * scale);
+                // Some points on coordinate planes and axes, and at the centre.
+                match (rnd() * 12.0) as usize {
+                    0 => y[0] = 0.0,
+                    1 => y[1] = 0.0,
+                    2 => y[2] = 0.0,
+                    3 => (y[0], y[1]) = (0.0, 0.0),
+                    4 => (y[1], y[2]) = (0.0, 0.0),
+                    5 => *y = [0.0; 3],
+                    _ => {}
+                }
+            }
+            // Every other point, in a shuffled order, as the callers pass subsets.
+            let items = || {
+                (0..n)
+                    .rev()
+                    .filter(|i| i % 2 == 0 || n < 9)
+                    .map(|i| (i, local[i]))
+            };
+            let mut seen = vec![0u32; n];
+            let one_point = |i: usize| {
+                let ys = local[i].map(f64::abs);
+                let x = closest_sorted(&e.sorted, ys);
+                (e.signed_from_closest(&ys, &x), e.normal_at(&local[i], &x))
+            };
+            e.distances_and_normals_batched(items(), |i, d, nrm| {
+                let (d1, n1) = one_point(i);
+                assert_eq!(d.to_bits(), d1.to_bits(), "trial {trial} point {i}");
+                assert_eq!(nrm.map(f64::to_bits), n1.map(f64::to_bits));
+                seen[i] += 1;
+            });
+            e.signed_distances_batched(items(), |i, d| {
+                assert_eq!(d.to_bits(), e.signed_distance_local(&local[i]).to_bits());
+                seen[i] += 1;
+            });
+            e.closest_lockstep(items(), |i, _, ys, x| {
                 assert_eq!(
-                    out[i].to_bits(),
-                    one.to_bits(),
-                    "camera: trial {trial} point {i}"
+                    e.signed_from_closest(ys, x).to_bits(),
+                    one_point(i).0.to_bits()
                 );
+                seen[i] += 1;
+            });
+            for (i, &s) in seen.iter().enumerate() {
+                assert_eq!(s, if i % 2 == 0 || n < 9 { 3 } else { 0 }, "point {i}");
             }
         }
         eprintln!("AVX-512 stream used: {}", stream::available());

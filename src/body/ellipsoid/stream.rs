@@ -1,4 +1,4 @@
-//! Signed distances of a block of points to one ellipsoid, the root-finder run as a
+//! Closest points on one ellipsoid of a block of points, the root-finder run as a
 //! stream of points through AVX-512 registers.
 //!
 //! The lockstep root-finder ([`super::solve_secular_lanes`]) has two costs beyond its
@@ -11,13 +11,14 @@
 //! independent registers of 8 lanes are in flight at once, so the divider and the
 //! square-root unit stay busy.
 //!
-//! The set-up (numerators and bracket) and the finish (closest point, distance, sign)
+//! The set-up (numerators and bracket) and the finish (the closest point from the root)
 //! are the scalar code's expressions evaluated 8 points at a time. Every operation is
 //! the scalar code's IEEE operation in the scalar code's order (no fused multiply-add,
-//! no reassociation), and each lane runs the scalar stopping rule, so the distances
-//! are bit-identical to [`SortedPlacement::signed_distance_local`]; a test checks it.
+//! no reassociation), and each lane runs the scalar stopping rule, so the closest
+//! points, and the distances and normals made from them, are bit-identical to the
+//! scalar code's; a test checks it.
 
-use super::{SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_TOLERANCE};
+use super::{closest_sorted, SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_TOLERANCE};
 
 /// Points per call of the kernel (its queue lives on the stack).
 pub const BLOCK: usize = 256;
@@ -26,10 +27,25 @@ pub const BLOCK: usize = 256;
 /// latency with the others' work; 4 measured best of 2–6).
 const STREAMS: usize = 4;
 
-/// Whether this CPU runs the AVX-512 kernel (checked once per call; the check is a
-/// cached load).
+/// Whether this CPU runs the AVX-512 kernels (AVX-512F and BMI2), unless the
+/// environment variable `DEPTHPOSE_NO_AVX512` is set (to compare against, or to test,
+/// the paths without them). Decided once per process.
 #[inline]
 pub fn available() -> bool {
+    use std::sync::atomic::{AtomicU8, Ordering};
+    // 0: not decided yet; 1: no; 2: yes.
+    static DECIDED: AtomicU8 = AtomicU8::new(0);
+    match DECIDED.load(Ordering::Relaxed) {
+        0 => {
+            let yes = cpu_has_avx512() && std::env::var_os("DEPTHPOSE_NO_AVX512").is_none();
+            DECIDED.store(1 + yes as u8, Ordering::Relaxed);
+            yes
+        }
+        d => d == 2,
+    }
+}
+
+fn cpu_has_avx512() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx512f")
@@ -41,24 +57,20 @@ pub fn available() -> bool {
     }
 }
 
-/// `out[i]` = signed distance to `e` of point `(y0[i], y1[i], y2[i])`, for every
-/// `i < out.len()` (≤ [`BLOCK`]; the inputs at least as long). The points are in the
-/// camera frame if `CAMERA` (as for [`SortedPlacement::signed_distance`]), else local
-/// (as for [`SortedPlacement::signed_distance_local`]).
+/// `x[r][i]` = the closest point, in the first octant of the sorted axes, on `e` to the
+/// local point `(y0[i], y1[i], y2[i])` (from [`SortedPlacement::local`]) with its
+/// coordinates made positive: what `closest_sorted` gives, for every `i < x[0].len()`
+/// (≤ [`BLOCK`]; the inputs at least as long).
 ///
 /// # Safety
 /// The CPU must support AVX-512F and BMI2 ([`available`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,bmi2")]
-pub unsafe fn signed_distances_block<const CAMERA: bool>(
-    e: &SortedPlacement,
-    y: [&[f64]; 3],
-    out: &mut [f64],
-) {
+pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [&mut [f64]; 3]) {
     use std::arch::x86_64::*;
     use std::mem::MaybeUninit;
-    let n = out.len();
-    assert!(n <= BLOCK && y.iter().all(|c| c.len() >= n));
+    let n = x[0].len();
+    assert!(n <= BLOCK && y.iter().all(|c| c.len() >= n) && x.iter().all(|c| c.len() == n));
     let c = &e.sorted;
 
     // Scratch, written before it is read (left uninitialised: zeroing it cost more
@@ -81,29 +93,9 @@ pub unsafe fn signed_distances_block<const CAMERA: bool>(
             (1u8 << (n - base)) - 1
         }
     };
-    // |local coordinates| of the points base.. (masked by m), the scalar expressions.
-    let (axes, centre) = (e.axes, e.centre);
+    // |local coordinates| of the points base.. (masked by m).
     let first_octant = |base: usize, m: __mmask8| -> [__m512d; 3] {
-        let load = |k: usize| _mm512_maskz_loadu_pd(m, y[k].as_ptr().add(base));
-        let p = [load(0), load(1), load(2)];
-        if !CAMERA {
-            return [abs(p[0]), abs(p[1]), abs(p[2])];
-        }
-        let d = [
-            _mm512_sub_pd(p[0], splat(centre[0])),
-            _mm512_sub_pd(p[1], splat(centre[1])),
-            _mm512_sub_pd(p[2], splat(centre[2])),
-        ];
-        std::array::from_fn(|k| {
-            let a = axes[k];
-            abs(_mm512_add_pd(
-                _mm512_add_pd(
-                    _mm512_mul_pd(splat(a[0]), d[0]),
-                    _mm512_mul_pd(splat(a[1]), d[1]),
-                ),
-                _mm512_mul_pd(splat(a[2]), d[2]),
-            ))
-        })
+        std::array::from_fn(|k| abs(_mm512_maskz_loadu_pd(m, y[k].as_ptr().add(base))))
     };
 
     // Set-up, 8 points at a time: `Sorted::secular_setup` of |y|.
@@ -253,12 +245,10 @@ pub unsafe fn signed_distances_block<const CAMERA: bool>(
             going[g] = go;
         }
     }
-    // Finish, 8 points at a time: `Sorted::closest_from_root` and
-    // `SortedPlacement::signed_from_closest`.
-    let inv_e2 = e.inv_e2;
+    // Finish, 8 points at a time: `Sorted::closest_from_root`.
+    let [x0, x1, x2] = x;
     for base in (0..n).step_by(8) {
         let m = lanes(base);
-        let [ys0, ys1, ys2] = first_octant(base, m);
         let from = |q: *const f64| _mm512_maskz_loadu_pd(m, q.add(base));
         let u = from(roots);
         let (t0, t1, t2) = (
@@ -272,37 +262,19 @@ pub unsafe fn signed_distances_block<const CAMERA: bool>(
         let inv = _mm512_mul_pd(inv, t2);
         let r1 = _mm512_mul_pd(inv, t0);
         let r0 = _mm512_mul_pd(inv, t1);
-        let x = |k: usize, r: __m512d| _mm512_mul_pd(_mm512_mul_pd(splat(c.e[k]), from(qa[k])), r);
-        let (x0, x1, x2) = (x(0, r0), x(1, r1), x(2, r2));
-        let sq = |v: __m512d| _mm512_mul_pd(v, v);
-        let d = _mm512_sqrt_pd(_mm512_add_pd(
-            _mm512_add_pd(sq(_mm512_sub_pd(ys0, x0)), sq(_mm512_sub_pd(ys1, x1))),
-            sq(_mm512_sub_pd(ys2, x2)),
-        ));
-        let level = _mm512_add_pd(
-            _mm512_add_pd(
-                _mm512_mul_pd(sq(ys0), splat(inv_e2[0])),
-                _mm512_mul_pd(sq(ys1), splat(inv_e2[1])),
-            ),
-            _mm512_mul_pd(sq(ys2), splat(inv_e2[2])),
-        );
-        // Negative inside: flip the sign bit (as the scalar `-d` does).
-        let inside = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(level, one);
-        let d = _mm512_castpd_si512(d);
-        let signed = _mm512_mask_xor_epi64(d, inside, d, _mm512_set1_epi64(i64::MIN));
-        _mm512_mask_storeu_pd(out.as_mut_ptr().add(base), m, _mm512_castsi512_pd(signed));
+        let closest =
+            |k: usize, r: __m512d| _mm512_mul_pd(_mm512_mul_pd(splat(c.e[k]), from(qa[k])), r);
+        _mm512_mask_storeu_pd(x0.as_mut_ptr().add(base), m, closest(0, r0));
+        _mm512_mask_storeu_pd(x1.as_mut_ptr().add(base), m, closest(1, r1));
+        _mm512_mask_storeu_pd(x2.as_mut_ptr().add(base), m, closest(2, r2));
     }
     for (w, &bits) in planar.iter().enumerate() {
         let mut bits = bits;
         while bits != 0 {
             let i = 64 * w + bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let p = [y[0][i], y[1][i], y[2][i]];
-            out[i] = if CAMERA {
-                e.signed_distance(&p)
-            } else {
-                e.signed_distance_local(&p)
-            };
+            let ys = [y[0][i].abs(), y[1][i].abs(), y[2][i].abs()];
+            [x0[i], x1[i], x2[i]] = closest_sorted(c, ys);
         }
     }
 }
