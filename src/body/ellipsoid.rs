@@ -860,19 +860,19 @@ impl SortedPlacement {
         let mut coords = std::mem::MaybeUninit::<[[f64; BLOCK]; 6]>::uninit();
         let index = index.as_mut_ptr() as *mut usize;
         let base = coords.as_mut_ptr() as *mut f64;
-        // SAFETY: the pointers stay inside the two buffers; a block's first m entries
-        // are written before they are read; the CPU has AVX-512F and BMI2 (checked by
-        // the caller).
+        // SAFETY: the pointers stay inside the two buffers; a block's first m points
+        // are written before slices are made of them, and its closest points are made
+        // slices of only after the kernel wrote them; the CPU has AVX-512F and BMI2
+        // (checked by the caller).
         let mut flush = |m: usize| unsafe {
-            let col = |k: usize| std::slice::from_raw_parts_mut(base.add(k * BLOCK), m);
-            let (y, x) = ([col(0), col(1), col(2)], [col(3), col(4), col(5)]);
-            stream::closest_block(self, [&*y[0], &*y[1], &*y[2]], x);
-            let [y0, y1, y2] = y.map(|c| &*c);
-            let (x0, x1, x2) = (col(3), col(4), col(5));
+            let col = |k: usize| base.add(k * BLOCK);
+            let y = [0, 1, 2].map(|k| std::slice::from_raw_parts(col(k), m));
+            stream::closest_block(self, y, [col(3), col(4), col(5)]);
+            let x = [3, 4, 5].map(|k| std::slice::from_raw_parts(col(k), m));
             for j in 0..m {
-                let yj = [y0[j], y1[j], y2[j]];
+                let yj = [y[0][j], y[1][j], y[2][j]];
                 let ys = [yj[0].abs(), yj[1].abs(), yj[2].abs()];
-                emit(*index.add(j), &yj, &ys, &[x0[j], x1[j], x2[j]]);
+                emit(*index.add(j), &yj, &ys, &[x[0][j], x[1][j], x[2][j]]);
             }
         };
         let mut m = 0;

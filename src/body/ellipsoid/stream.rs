@@ -59,18 +59,19 @@ fn cpu_has_avx512() -> bool {
 
 /// `x[r][i]` = the closest point, in the first octant of the sorted axes, on `e` to the
 /// local point `(y0[i], y1[i], y2[i])` (from [`SortedPlacement::local`]) with its
-/// coordinates made positive: what `closest_sorted` gives, for every `i < x[0].len()`
-/// (≤ [`BLOCK`]; the inputs at least as long).
+/// coordinates made positive: what `closest_sorted` gives, for every `i < y[0].len()`
+/// (≤ [`BLOCK`]; the three inputs equally long).
 ///
 /// # Safety
-/// The CPU must support AVX-512F and BMI2 ([`available`]).
+/// The CPU must support AVX-512F and BMI2 ([`available`]); each `x[r]` must be valid
+/// for writing `y[0].len()` values (they may be uninitialised: they are only written).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,bmi2")]
-pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [&mut [f64]; 3]) {
+pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [*mut f64; 3]) {
     use std::arch::x86_64::*;
     use std::mem::MaybeUninit;
-    let n = x[0].len();
-    assert!(n <= BLOCK && y.iter().all(|c| c.len() >= n) && x.iter().all(|c| c.len() == n));
+    let n = y[0].len();
+    assert!(n <= BLOCK && y.iter().all(|c| c.len() == n));
     let c = &e.sorted;
 
     // Scratch, written before it is read (left uninitialised: zeroing it cost more
@@ -264,9 +265,9 @@ pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [&mut [f64];
         let r0 = _mm512_mul_pd(inv, t1);
         let closest =
             |k: usize, r: __m512d| _mm512_mul_pd(_mm512_mul_pd(splat(c.e[k]), from(qa[k])), r);
-        _mm512_mask_storeu_pd(x0.as_mut_ptr().add(base), m, closest(0, r0));
-        _mm512_mask_storeu_pd(x1.as_mut_ptr().add(base), m, closest(1, r1));
-        _mm512_mask_storeu_pd(x2.as_mut_ptr().add(base), m, closest(2, r2));
+        _mm512_mask_storeu_pd(x0.add(base), m, closest(0, r0));
+        _mm512_mask_storeu_pd(x1.add(base), m, closest(1, r1));
+        _mm512_mask_storeu_pd(x2.add(base), m, closest(2, r2));
     }
     for (w, &bits) in planar.iter().enumerate() {
         let mut bits = bits;
@@ -274,7 +275,8 @@ pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [&mut [f64];
             let i = 64 * w + bits.trailing_zeros() as usize;
             bits &= bits - 1;
             let ys = [y[0][i].abs(), y[1][i].abs(), y[2][i].abs()];
-            [x0[i], x1[i], x2[i]] = closest_sorted(c, ys);
+            let closest = closest_sorted(c, ys);
+            (*x0.add(i), *x1.add(i), *x2.add(i)) = (closest[0], closest[1], closest[2]);
         }
     }
 }
