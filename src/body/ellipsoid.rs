@@ -744,7 +744,7 @@ impl SortedPlacement {
     /// Signed distances of camera-frame points in single precision, for callers whose
     /// points and results are f32: `out[i]` for every `i < out.len()`. With AVX-512
     /// the stream root-finder runs in f32, 16 lanes to a register (module
-    /// `stream_f32`: within ~1e-6 m of [`Self::signed_distance`]); else in f64,
+    /// `stream_f32`: within ~3e-7 × max(1 m, |d|) of [`Self::signed_distance`]); else in f64,
     /// [`LANES`] points at a time in lockstep.
     ///
     /// With a `cap`, a point whose [`Self::distance_lower_bound`] reaches `cap` gets
