@@ -808,7 +808,12 @@ impl SortedPlacement {
         items: impl Iterator<Item = (usize, [f64; 3])>,
         mut emit: impl FnMut(usize, f64),
     ) {
-        self.closest_batched(items, |i, _, ys, x| {
+        #[cfg(target_arch = "x86_64")]
+        if stream::available() {
+            self.streamed::<false>(items, |i, d, _| emit(i, d));
+            return;
+        }
+        self.closest_lockstep(items, |i, _, ys, x| {
             emit(i, self.signed_from_closest(ys, x))
         });
     }
@@ -822,57 +827,50 @@ impl SortedPlacement {
         items: impl Iterator<Item = (usize, [f64; 3])>,
         mut emit: impl FnMut(usize, f64, [f64; 3]),
     ) {
-        self.closest_batched(items, |i, y, ys, x| {
+        #[cfg(target_arch = "x86_64")]
+        if stream::available() {
+            self.streamed::<true>(items, emit);
+            return;
+        }
+        self.closest_lockstep(items, |i, y, ys, x| {
             emit(i, self.signed_from_closest(ys, x), self.normal_at(y, x))
         });
     }
 
-    /// The first-octant closest point `x` of each local point `y` of `items`:
-    /// `emit(i, y, |y|, x)`, the values `closest_sorted` gives. With AVX-512 the points
-    /// go through the stream root-finder [`stream::BLOCK`] at a time (module `stream`),
-    /// else [`LANES`] at a time through the lockstep root-finder.
-    #[inline]
-    fn closest_batched(
-        &self,
-        items: impl Iterator<Item = (usize, [f64; 3])>,
-        emit: impl FnMut(usize, &[f64; 3], &[f64; 3], &[f64; 3]),
-    ) {
-        #[cfg(target_arch = "x86_64")]
-        if stream::available() {
-            self.closest_streamed(items, emit);
-            return;
-        }
-        self.closest_lockstep(items, emit);
-    }
-
-    /// [`Self::closest_batched`] through the stream: the items buffered one coordinate
-    /// per array, a block at a time.
+    /// The batched queries through the AVX-512 stream (module `stream`): the items
+    /// buffered one coordinate per array, [`stream::BLOCK`] at a time; `emit(i, d, n)`
+    /// (`n` only with `NORMALS`, else zeros).
     #[cfg(target_arch = "x86_64")]
-    fn closest_streamed(
+    fn streamed<const NORMALS: bool>(
         &self,
         items: impl Iterator<Item = (usize, [f64; 3])>,
-        mut emit: impl FnMut(usize, &[f64; 3], &[f64; 3], &[f64; 3]),
+        mut emit: impl FnMut(usize, f64, [f64; 3]),
     ) {
         use stream::BLOCK;
-        // Left uninitialised (zeroing ~14 KB per call would cost more than a short
+        // Left uninitialised (zeroing ~16 KB per call would cost more than a short
         // call's solve); only the entries written are read.
         let mut index = std::mem::MaybeUninit::<[usize; BLOCK]>::uninit();
-        let mut coords = std::mem::MaybeUninit::<[[f64; BLOCK]; 6]>::uninit();
+        let mut columns = std::mem::MaybeUninit::<[[f64; BLOCK]; 7]>::uninit();
         let index = index.as_mut_ptr() as *mut usize;
-        let base = coords.as_mut_ptr() as *mut f64;
+        let base = columns.as_mut_ptr() as *mut f64;
         // SAFETY: the pointers stay inside the two buffers; a block's first m points
-        // are written before slices are made of them, and its closest points are made
-        // slices of only after the kernel wrote them; the CPU has AVX-512F and BMI2
-        // (checked by the caller).
+        // are written before slices are made of them, and its results are read only
+        // after the kernel wrote them; the CPU has AVX-512F and BMI2 (checked by the
+        // callers).
         let mut flush = |m: usize| unsafe {
             let col = |k: usize| base.add(k * BLOCK);
             let y = [0, 1, 2].map(|k| std::slice::from_raw_parts(col(k), m));
-            stream::closest_block(self, y, [col(3), col(4), col(5)]);
-            let x = [3, 4, 5].map(|k| std::slice::from_raw_parts(col(k), m));
-            for j in 0..m {
-                let yj = [y[0][j], y[1][j], y[2][j]];
-                let ys = [yj[0].abs(), yj[1].abs(), yj[2].abs()];
-                emit(*index.add(j), &yj, &ys, &[x[0][j], x[1][j], x[2][j]]);
+            stream::distances_block::<NORMALS>(self, y, col(3), [col(4), col(5), col(6)]);
+            let d = std::slice::from_raw_parts(col(3), m);
+            if NORMALS {
+                let n = [4, 5, 6].map(|k| std::slice::from_raw_parts(col(k), m));
+                for j in 0..m {
+                    emit(*index.add(j), d[j], [n[0][j], n[1][j], n[2][j]]);
+                }
+            } else {
+                for (j, &dj) in d.iter().enumerate() {
+                    emit(*index.add(j), dj, [0.0; 3]);
+                }
             }
         };
         let mut m = 0;
@@ -895,8 +893,10 @@ impl SortedPlacement {
         }
     }
 
-    /// [`Self::closest_batched`] through the lockstep root-finder, [`LANES`] points at a
-    /// time (points on a coordinate plane one by one, through the special cases).
+    /// The first-octant closest point `x` of each local point `y` of `items`:
+    /// `emit(i, y, |y|, x)`, the values `closest_sorted` gives, through the lockstep
+    /// root-finder [`LANES`] points at a time (points on a coordinate plane one by one,
+    /// through the special cases). The batched queries' path without AVX-512.
     #[inline]
     fn closest_lockstep(
         &self,

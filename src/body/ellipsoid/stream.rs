@@ -1,5 +1,5 @@
-//! Closest points on one ellipsoid of a block of points, the root-finder run as a
-//! stream of points through AVX-512 registers.
+//! Signed distances (and normals) of a block of points to one ellipsoid, the
+//! root-finder run as a stream of points through AVX-512 registers.
 //!
 //! The lockstep root-finder ([`super::solve_secular_lanes`]) has two costs beyond its
 //! arithmetic: a group of lanes iterates as long as its slowest lane (3.7 passes per
@@ -11,12 +11,12 @@
 //! independent registers of 8 lanes are in flight at once, so the divider and the
 //! square-root unit stay busy.
 //!
-//! The set-up (numerators and bracket) and the finish (the closest point from the root)
-//! are the scalar code's expressions evaluated 8 points at a time. Every operation is
+//! The set-up (numerators and bracket) and the finish (closest point, signed distance
+//! and normal from the root) are the scalar code's expressions evaluated 8 points at a
+//! time. Every operation is
 //! the scalar code's IEEE operation in the scalar code's order (no fused multiply-add,
-//! no reassociation), and each lane runs the scalar stopping rule, so the closest
-//! points, and the distances and normals made from them, are bit-identical to the
-//! scalar code's; a test checks it.
+//! no reassociation), and each lane runs the scalar stopping rule, so the distances and
+//! normals are bit-identical to the scalar code's; a test checks it.
 
 use super::{closest_sorted, SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_TOLERANCE};
 
@@ -57,17 +57,24 @@ fn cpu_has_avx512() -> bool {
     }
 }
 
-/// `x[r][i]` = the closest point, in the first octant of the sorted axes, on `e` to the
-/// local point `(y0[i], y1[i], y2[i])` (from [`SortedPlacement::local`]) with its
-/// coordinates made positive: what `closest_sorted` gives, for every `i < y[0].len()`
-/// (≤ [`BLOCK`]; the three inputs equally long).
+/// `d[i]` = the signed distance to `e` of the local point `(y0[i], y1[i], y2[i])` (from
+/// [`SortedPlacement::local`]), and with `NORMALS` `normal[c][i]` = the camera-frame outward
+/// unit normal at its closest point: what [`SortedPlacement::signed_distance_local`] and
+/// `normal_at` give, for every `i < y[0].len()` (≤ [`BLOCK`]; the three inputs equally
+/// long).
 ///
 /// # Safety
-/// The CPU must support AVX-512F and BMI2 ([`available`]); each `x[r]` must be valid
-/// for writing `y[0].len()` values (they may be uninitialised: they are only written).
+/// The CPU must support AVX-512F and BMI2 ([`available`]); `d` and (with `NORMALS`)
+/// each `normal[c]` must be valid for writing `y[0].len()` values (they may be
+/// uninitialised: they are only written).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,bmi2")]
-pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [*mut f64; 3]) {
+pub unsafe fn distances_block<const NORMALS: bool>(
+    e: &SortedPlacement,
+    y: [&[f64]; 3],
+    d: *mut f64,
+    normal: [*mut f64; 3],
+) {
     use std::arch::x86_64::*;
     use std::mem::MaybeUninit;
     let n = y[0].len();
@@ -246,8 +253,10 @@ pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [*mut f64; 3
             going[g] = go;
         }
     }
-    // Finish, 8 points at a time: `Sorted::closest_from_root`.
-    let [x0, x1, x2] = x;
+    // Finish, 8 points at a time: `Sorted::closest_from_root`,
+    // `SortedPlacement::signed_from_closest` and `SortedPlacement::normal_at`.
+    let (inv_e2, axes) = (e.inv_e2, e.axes);
+    let sign_bit = _mm512_set1_epi64(i64::MIN);
     for base in (0..n).step_by(8) {
         let m = lanes(base);
         let from = |q: *const f64| _mm512_maskz_loadu_pd(m, q.add(base));
@@ -265,18 +274,69 @@ pub unsafe fn closest_block(e: &SortedPlacement, y: [&[f64]; 3], x: [*mut f64; 3
         let r0 = _mm512_mul_pd(inv, t1);
         let closest =
             |k: usize, r: __m512d| _mm512_mul_pd(_mm512_mul_pd(splat(c.e[k]), from(qa[k])), r);
-        _mm512_mask_storeu_pd(x0.add(base), m, closest(0, r0));
-        _mm512_mask_storeu_pd(x1.add(base), m, closest(1, r1));
-        _mm512_mask_storeu_pd(x2.add(base), m, closest(2, r2));
+        let x = [closest(0, r0), closest(1, r1), closest(2, r2)];
+        let yl: [__m512d; 3] = std::array::from_fn(|k| from(y[k].as_ptr()));
+        let ys = yl.map(abs);
+        let sq = |v: __m512d| _mm512_mul_pd(v, v);
+        let dist = _mm512_sqrt_pd(_mm512_add_pd(
+            _mm512_add_pd(
+                sq(_mm512_sub_pd(ys[0], x[0])),
+                sq(_mm512_sub_pd(ys[1], x[1])),
+            ),
+            sq(_mm512_sub_pd(ys[2], x[2])),
+        ));
+        let level = _mm512_add_pd(
+            _mm512_add_pd(
+                _mm512_mul_pd(sq(ys[0]), splat(inv_e2[0])),
+                _mm512_mul_pd(sq(ys[1]), splat(inv_e2[1])),
+            ),
+            _mm512_mul_pd(sq(ys[2]), splat(inv_e2[2])),
+        );
+        // Negative inside: flip the sign bit (as the scalar `-d` does).
+        let inside = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(level, one);
+        let bits = _mm512_castpd_si512(dist);
+        let signed = _mm512_mask_xor_epi64(bits, inside, bits, sign_bit);
+        _mm512_mask_storeu_pd(d.add(base), m, _mm512_castsi512_pd(signed));
+        if NORMALS {
+            // g_k = copysign(x_k, y_k) / e_k² (x_k ≥ +0, so the sign bit of y_k is
+            // or-ed in), normalised, turned to the camera frame.
+            let g: [__m512d; 3] = std::array::from_fn(|k| {
+                let signed = _mm512_or_si512(
+                    _mm512_castpd_si512(x[k]),
+                    _mm512_and_si512(_mm512_castpd_si512(yl[k]), sign_bit),
+                );
+                _mm512_mul_pd(_mm512_castsi512_pd(signed), splat(inv_e2[k]))
+            });
+            let inv = _mm512_div_pd(
+                one,
+                _mm512_sqrt_pd(_mm512_add_pd(_mm512_add_pd(sq(g[0]), sq(g[1])), sq(g[2]))),
+            );
+            for (col, out) in normal.iter().enumerate() {
+                let v = _mm512_add_pd(
+                    _mm512_add_pd(
+                        _mm512_mul_pd(g[0], splat(axes[0][col])),
+                        _mm512_mul_pd(g[1], splat(axes[1][col])),
+                    ),
+                    _mm512_mul_pd(g[2], splat(axes[2][col])),
+                );
+                _mm512_mask_storeu_pd(out.add(base), m, _mm512_mul_pd(v, inv));
+            }
+        }
     }
     for (w, &bits) in planar.iter().enumerate() {
         let mut bits = bits;
         while bits != 0 {
             let i = 64 * w + bits.trailing_zeros() as usize;
             bits &= bits - 1;
-            let ys = [y[0][i].abs(), y[1][i].abs(), y[2][i].abs()];
-            let closest = closest_sorted(c, ys);
-            (*x0.add(i), *x1.add(i), *x2.add(i)) = (closest[0], closest[1], closest[2]);
+            let yi = [y[0][i], y[1][i], y[2][i]];
+            let ys = [yi[0].abs(), yi[1].abs(), yi[2].abs()];
+            let x = closest_sorted(c, ys);
+            *d.add(i) = e.signed_from_closest(&ys, &x);
+            if NORMALS {
+                for (out, v) in normal.iter().zip(e.normal_at(&yi, &x)) {
+                    *out.add(i) = v;
+                }
+            }
         }
     }
 }
