@@ -9,10 +9,12 @@ step "installing depthpose[test]"
 python3 -m pip install --quiet --disable-pip-version-check ".[test]"
 step "Rust tests"
 cargo test --quiet
-# Again without the AVX-512 kernels (a no-op difference on CPUs without them), so the
-# fallback paths are tested here too: the body model's and the fit's tests.
-step "Rust tests without AVX-512 (DEPTHPOSE_NO_AVX512)"
+# Again without the AVX-512 kernels (the AVX2 stream), and without any stream (the
+# lockstep root-finder), so the paths other CPUs take are tested here too: the body
+# model's and the fit's tests.
+step "Rust tests without AVX-512 (DEPTHPOSE_NO_AVX512), then without the stream"
 DEPTHPOSE_NO_AVX512=1 cargo test --quiet --lib -- body:: fit::
+DEPTHPOSE_NO_AVX512=1 DEPTHPOSE_NO_STREAM=1 cargo test --quiet --lib -- body:: fit::
 step "Python tests"
 # From the project root pytest imports the installed wheel: python/ is not on sys.path.
 python3 -m pytest -q tests "$@"

@@ -16,6 +16,8 @@ use nalgebra::{Matrix3, Vector3};
 
 mod stream;
 #[cfg(target_arch = "x86_64")]
+mod stream_avx2;
+#[cfg(target_arch = "x86_64")]
 mod stream_f32;
 
 /// Newton/bisection stops when the step is below this relative size. Newton converges
@@ -564,6 +566,11 @@ impl PlacedEllipsoid {
     }
 }
 
+/// A stream kernel: signed distances of a block of local points to an ellipsoid (and
+/// normals, for the `NORMALS` forms) written through the pointers.
+#[cfg(target_arch = "x86_64")]
+type StreamKernel = unsafe fn(&SortedPlacement, [&[f64]; 3], *mut f64, [*mut f64; 3]);
+
 /// Thresholds for [`SortedPlacement::is_beyond`] (one distance, one ellipsoid).
 #[derive(Debug, Clone, Copy)]
 pub struct Beyond {
@@ -809,8 +816,8 @@ impl SortedPlacement {
         mut emit: impl FnMut(usize, f64),
     ) {
         #[cfg(target_arch = "x86_64")]
-        if stream::available() {
-            self.streamed::<false>(items, |i, d, _| emit(i, d));
+        if let Some(kernel) = Self::stream_kernel::<false>() {
+            self.streamed::<false>(kernel, items, |i, d, _| emit(i, d));
             return;
         }
         self.closest_lockstep(items, |i, _, ys, x| {
@@ -828,8 +835,8 @@ impl SortedPlacement {
         mut emit: impl FnMut(usize, f64, [f64; 3]),
     ) {
         #[cfg(target_arch = "x86_64")]
-        if stream::available() {
-            self.streamed::<true>(items, emit);
+        if let Some(kernel) = Self::stream_kernel::<true>() {
+            self.streamed::<true>(kernel, items, emit);
             return;
         }
         self.closest_lockstep(items, |i, y, ys, x| {
@@ -837,12 +844,24 @@ impl SortedPlacement {
         });
     }
 
-    /// The batched queries through the AVX-512 stream (module `stream`): the items
+    /// The stream kernel this CPU runs ([`stream::kernel`]), for distances and (with
+    /// `NORMALS`) normals; None for the lockstep.
+    #[cfg(target_arch = "x86_64")]
+    fn stream_kernel<const NORMALS: bool>() -> Option<StreamKernel> {
+        match stream::kernel() {
+            stream::Kernel::Avx512 => Some(stream::distances_block::<NORMALS>),
+            stream::Kernel::Avx2 => Some(stream_avx2::distances_block::<NORMALS>),
+            stream::Kernel::Lockstep => None,
+        }
+    }
+
+    /// The batched queries through a stream `kernel` (module `stream`): the items
     /// buffered one coordinate per array, [`stream::BLOCK`] at a time; `emit(i, d, n)`
-    /// (`n` only with `NORMALS`, else zeros).
+    /// (`n` only with `NORMALS`, whose kernel computes them; else zeros).
     #[cfg(target_arch = "x86_64")]
     fn streamed<const NORMALS: bool>(
         &self,
+        kernel: StreamKernel,
         items: impl Iterator<Item = (usize, [f64; 3])>,
         mut emit: impl FnMut(usize, f64, [f64; 3]),
     ) {
@@ -860,7 +879,7 @@ impl SortedPlacement {
         let mut flush = |m: usize| unsafe {
             let col = |k: usize| base.add(k * BLOCK);
             let y = [0, 1, 2].map(|k| std::slice::from_raw_parts(col(k), m));
-            stream::distances_block::<NORMALS>(self, y, col(3), [col(4), col(5), col(6)]);
+            kernel(self, y, col(3), [col(4), col(5), col(6)]);
             let d = std::slice::from_raw_parts(col(3), m);
             if NORMALS {
                 let n = [4, 5, 6].map(|k| std::slice::from_raw_parts(col(k), m));
@@ -1365,11 +1384,49 @@ mod tests {
                 );
                 seen[i] += 1;
             });
+            // Every stream kernel this CPU runs, whichever the process chose.
+            #[cfg(target_arch = "x86_64")]
+            for (distances, normals) in stream_kernels() {
+                e.streamed::<true>(normals, items(), |i, d, nrm| {
+                    let (d1, n1) = one_point(i);
+                    assert_eq!(d.to_bits(), d1.to_bits(), "trial {trial} point {i}");
+                    assert_eq!(nrm.map(f64::to_bits), n1.map(f64::to_bits));
+                    seen[i] += 1;
+                });
+                e.streamed::<false>(distances, items(), |i, d, _| {
+                    assert_eq!(d.to_bits(), one_point(i).0.to_bits());
+                    seen[i] += 1;
+                });
+            }
+            #[cfg(target_arch = "x86_64")]
+            let calls = 3 + 2 * stream_kernels().len() as u32;
+            #[cfg(not(target_arch = "x86_64"))]
+            let calls = 3;
             for (i, &s) in seen.iter().enumerate() {
-                assert_eq!(s, if i % 2 == 0 || n < 9 { 3 } else { 0 }, "point {i}");
+                assert_eq!(s, if i % 2 == 0 || n < 9 { calls } else { 0 }, "point {i}");
             }
         }
-        eprintln!("AVX-512 stream used: {}", stream::available());
+        #[cfg(target_arch = "x86_64")]
+        eprintln!("stream kernels compared: {}", stream_kernels().len());
+    }
+
+    /// The (distances, distances and normals) stream kernels this CPU runs.
+    #[cfg(target_arch = "x86_64")]
+    fn stream_kernels() -> Vec<(StreamKernel, StreamKernel)> {
+        let mut kernels: Vec<(StreamKernel, StreamKernel)> = Vec::new();
+        if is_x86_feature_detected!("avx512f") && is_x86_feature_detected!("bmi2") {
+            kernels.push((
+                stream::distances_block::<false>,
+                stream::distances_block::<true>,
+            ));
+        }
+        if is_x86_feature_detected!("avx2") {
+            kernels.push((
+                stream_avx2::distances_block::<false>,
+                stream_avx2::distances_block::<true>,
+            ));
+        }
+        kernels
     }
 
     /// The single-precision block distances stay within 2e-6 m of the f64 distances of

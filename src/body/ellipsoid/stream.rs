@@ -27,21 +27,58 @@ pub const BLOCK: usize = 256;
 /// latency with the others' work; 4 measured best of 2–6).
 const STREAMS: usize = 4;
 
-/// Whether this CPU runs the AVX-512 kernels (AVX-512F and BMI2), unless the
-/// environment variable `DEPTHPOSE_NO_AVX512` is set (to compare against, or to test,
-/// the paths without them). Decided once per process.
+/// The kernel behind the batched exact distances, decided once per process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kernel {
+    /// [`distances_block`]: AVX-512F and BMI2.
+    Avx512,
+    /// The AVX2 form (module `stream_avx2`).
+    Avx2,
+    /// No stream: the lockstep root-finder.
+    Lockstep,
+}
+
+/// The best kernel this CPU runs: AVX-512 unless the environment variable
+/// `DEPTHPOSE_NO_AVX512` is set, else the AVX2 stream unless `DEPTHPOSE_NO_STREAM` is set
+/// (both for comparisons, and for testing the other paths), else the lockstep.
 #[inline]
-pub fn available() -> bool {
+pub fn kernel() -> Kernel {
     use std::sync::atomic::{AtomicU8, Ordering};
-    // 0: not decided yet; 1: no; 2: yes.
+    // 0: not decided yet; else 1 + the kernel's index.
     static DECIDED: AtomicU8 = AtomicU8::new(0);
+    const KERNELS: [Kernel; 3] = [Kernel::Avx512, Kernel::Avx2, Kernel::Lockstep];
     match DECIDED.load(Ordering::Relaxed) {
         0 => {
-            let yes = cpu_has_avx512() && std::env::var_os("DEPTHPOSE_NO_AVX512").is_none();
-            DECIDED.store(1 + yes as u8, Ordering::Relaxed);
-            yes
+            let set = |name: &str| std::env::var_os(name).is_some();
+            let k = if cpu_has_avx512() && !set("DEPTHPOSE_NO_AVX512") {
+                Kernel::Avx512
+            } else if cpu_has_avx2() && !set("DEPTHPOSE_NO_STREAM") {
+                Kernel::Avx2
+            } else {
+                Kernel::Lockstep
+            };
+            let index = KERNELS.iter().position(|&x| x == k).unwrap_or(2);
+            DECIDED.store(1 + index as u8, Ordering::Relaxed);
+            k
         }
-        d => d == 2,
+        d => KERNELS[(d - 1) as usize],
+    }
+}
+
+/// Whether the AVX-512 kernels run ([`kernel`] is [`Kernel::Avx512`]).
+#[inline]
+pub fn available() -> bool {
+    kernel() == Kernel::Avx512
+}
+
+fn cpu_has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
     }
 }
 
