@@ -19,6 +19,8 @@ mod stream;
 mod stream_avx2;
 #[cfg(target_arch = "x86_64")]
 mod stream_f32;
+#[cfg(target_arch = "x86_64")]
+mod stream_f32_avx2;
 
 /// Newton/bisection stops when the step is below this relative size. Newton converges
 /// quadratically, so the iterate after a step δ is off by about K·δ² (K = |H''/2H'|,
@@ -764,15 +766,23 @@ impl SortedPlacement {
         out: &mut [f32],
     ) {
         #[cfg(target_arch = "x86_64")]
-        if stream::available() {
-            let cap = cap.map(|c| c as f32);
-            for (b, o) in out.chunks_mut(stream::BLOCK).enumerate() {
-                let at = b * stream::BLOCK;
-                let block = [&p[0][at..], &p[1][at..], &p[2][at..]];
-                // SAFETY: the CPU has AVX-512F and BMI2 (checked just above).
-                unsafe { stream_f32::signed_distances_block_f32(self, block, cap, o) };
+        {
+            type Kernel = unsafe fn(&SortedPlacement, [&[f32]; 3], Option<f32>, &mut [f32]);
+            let kernel: Option<Kernel> = match stream::kernel() {
+                stream::Kernel::Avx512 => Some(stream_f32::signed_distances_block_f32),
+                stream::Kernel::Avx2 => Some(stream_f32_avx2::signed_distances_block_f32),
+                stream::Kernel::Lockstep => None,
+            };
+            if let Some(kernel) = kernel {
+                let cap = cap.map(|c| c as f32);
+                for (b, o) in out.chunks_mut(stream::BLOCK).enumerate() {
+                    let at = b * stream::BLOCK;
+                    let block = [&p[0][at..], &p[1][at..], &p[2][at..]];
+                    // SAFETY: the CPU has the kernel's instructions (`stream::kernel`).
+                    unsafe { kernel(self, block, cap, o) };
+                }
+                return;
             }
-            return;
         }
         self.signed_distances_camera_lockstep_f32(p, cap, out);
     }
@@ -1442,6 +1452,7 @@ mod tests {
             (seed >> 11) as f64 / (1u64 << 53) as f64
         };
         let (mut worst, mut compared, mut bounded) = (0.0f64, 0usize, 0usize);
+        let mut avx2_compared = 0;
         for trial in 0..400 {
             let mut radii =
                 Vector3::new(0.02 + 0.4 * rnd(), 0.02 + 0.4 * rnd(), 0.02 + 0.4 * rnd());
@@ -1483,6 +1494,36 @@ mod tests {
             e.signed_distances_camera_soa_f32(pts, Some(cap), &mut capped);
             let mut capped_lockstep = vec![f32::NAN; n];
             e.signed_distances_camera_lockstep_f32(pts, Some(cap), &mut capped_lockstep);
+            // Both single-precision kernels, where the CPU runs them, give the same bits
+            // (the AVX2 one emulates the AVX-512 one's instructions, same arithmetic).
+            #[cfg(target_arch = "x86_64")]
+            if is_x86_feature_detected!("avx2") {
+                for c in [None, Some(cap as f32)] {
+                    let mut narrow = vec![f32::NAN; n];
+                    for (b, o) in narrow.chunks_mut(stream::BLOCK).enumerate() {
+                        let at = b * stream::BLOCK;
+                        let block = [&p[0][at..], &p[1][at..], &p[2][at..]];
+                        // SAFETY: the CPU has AVX2 (checked above).
+                        unsafe { stream_f32_avx2::signed_distances_block_f32(&e, block, c, o) };
+                    }
+                    let reference = if c.is_some() { &capped } else { &out };
+                    if stream::kernel() == stream::Kernel::Avx512 {
+                        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        assert_eq!(bits(&narrow), bits(reference), "trial {trial}, cap {c:?}");
+                    }
+                    for i in 0..n {
+                        let q = [p[0][i] as f64, p[1][i] as f64, p[2][i] as f64];
+                        let exact = e.signed_distance(&q);
+                        if c.is_none() || (narrow[i] as f64) < cap {
+                            assert!((narrow[i] as f64 - exact).abs() <= 2e-6);
+                        } else {
+                            assert!(narrow[i] as f64 >= cap - 1e-6);
+                            assert!(narrow[i] as f64 <= exact + 1e-6);
+                        }
+                    }
+                    avx2_compared += 1;
+                }
+            }
             for i in 0..n {
                 let q = [p[0][i] as f64, p[1][i] as f64, p[2][i] as f64];
                 let exact = e.signed_distance(&q);
@@ -1510,6 +1551,7 @@ mod tests {
             "the cap's bounds were exercised on {bounded} values"
         );
         eprintln!("f32 distances: worst error {worst:.2e} m over {compared} points");
+        eprintln!("f32 AVX2 kernel compared on {avx2_compared} blocks");
     }
 
     #[test]

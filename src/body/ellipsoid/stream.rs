@@ -65,12 +65,6 @@ pub fn kernel() -> Kernel {
     }
 }
 
-/// Whether the AVX-512 kernels run ([`kernel`] is [`Kernel::Avx512`]).
-#[inline]
-pub fn available() -> bool {
-    kernel() == Kernel::Avx512
-}
-
 fn cpu_has_avx2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
@@ -101,7 +95,7 @@ fn cpu_has_avx512() -> bool {
 /// long).
 ///
 /// # Safety
-/// The CPU must support AVX-512F and BMI2 ([`available`]); `d` and (with `NORMALS`)
+/// The CPU must support AVX-512F and BMI2 (see [`kernel`]); `d` and (with `NORMALS`)
 /// each `normal[c]` must be valid for writing `y[0].len()` values (they may be
 /// uninitialised: they are only written).
 #[cfg(target_arch = "x86_64")]

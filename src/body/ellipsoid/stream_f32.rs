@@ -21,9 +21,9 @@ use super::{SortedPlacement, MAX_ITERATIONS};
 /// Registers of 16 lanes iterated together.
 const STREAMS: usize = 4;
 /// |H| below this is a root to single-precision rounding.
-const H_TOLERANCE_F32: f32 = 4.0 * f32::EPSILON;
+pub(super) const H_TOLERANCE_F32: f32 = 4.0 * f32::EPSILON;
 /// Newton/bisection stops when the step is below this relative size.
-const ROOT_TOLERANCE_F32: f32 = 1e-4;
+pub(super) const ROOT_TOLERANCE_F32: f32 = 1e-4;
 
 /// `out[i]` = signed distance to `e` of camera-frame point `(y0[i], y1[i], y2[i])`, for
 /// every `i < out.len()` (≤ [`BLOCK`]; the inputs at least as long), solved in single
@@ -35,7 +35,7 @@ const ROOT_TOLERANCE_F32: f32 = 1e-4;
 /// exact distance is wanted, and get the same value as without a cap.
 ///
 /// # Safety
-/// The CPU must support AVX-512F and BMI2 ([`super::stream::available`]).
+/// The CPU must support AVX-512F and BMI2 (see [`super::stream::kernel`]).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,bmi2")]
 pub unsafe fn signed_distances_block_f32(
