@@ -41,7 +41,7 @@ const PACK: [[i32; 8]; 256] = {
         let (mut rank, mut lane) = (0, 0);
         while lane < 8 {
             if mask & (1 << lane) != 0 {
-                table[mask][rank] = lane as i32;
+                table[mask][rank] = lane;
                 rank += 1;
             }
             lane += 1;
