@@ -18,6 +18,7 @@
 //! no reassociation), and each lane runs the scalar stopping rule, so the distances and
 //! normals are bit-identical to the scalar code's; a test checks it.
 
+#[cfg(target_arch = "x86_64")]
 use super::{closest_sorted, SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_TOLERANCE};
 
 /// Points per call of the kernel (its queue lives on the stack).
