@@ -616,6 +616,12 @@ impl SortedPlacement {
         self.sorted.e[0]
     }
 
+    /// Camera-frame centre.
+    #[inline]
+    pub fn centre(&self) -> [f64; 3] {
+        self.centre
+    }
+
     /// Smallest half-axis.
     #[inline]
     pub fn min_radius(&self) -> f64 {

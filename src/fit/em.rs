@@ -397,7 +397,27 @@ fn unary_chunk(
     let mut local = [[0.0f64; CHUNK_POINTS]; 3];
     let mut beyond = [false; CHUNK_POINTS];
     let mut near = [0u16; CHUNK_POINTS];
+    // The chunk's bounding box: a segment whose bounding sphere, grown by the
+    // truncation, stays clear of it has every point of the chunk beyond the truncation.
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in buf.iter() {
+        for r in 0..3 {
+            lo[r] = lo[r].min(p[r]);
+            hi[r] = hi[r].max(p[r]);
+        }
+    }
     for (k, e) in geo.segments.iter().enumerate() {
+        // The per-point test below (|y| ≥ e_max + t) would mark every point of the
+        // chunk beyond, so skipping the segment changes nothing. The margin covers the
+        // rounding of that test's local coordinates (relative ~1e-15).
+        let c = e.centre();
+        let gap2: f64 = (0..3)
+            .map(|r| (lo[r] - c[r]).max(c[r] - hi[r]).max(0.0).powi(2))
+            .sum();
+        let clear = (e.max_radius() + pc.truncation) * (1.0 + 1e-9) + 1e-9;
+        if pc.truncation > 0.0 && gap2 >= clear * clear {
+            continue;
+        }
         // A lower bound of the distance at or beyond the truncation means the cost is
         // the cap, exactly what the exact distance would give; only the points nearer
         // than that need the exact (iterative) distance.
