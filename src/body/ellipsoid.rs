@@ -757,10 +757,10 @@ impl SortedPlacement {
     }
 
     /// Signed distances of camera-frame points in single precision, for callers whose
-    /// points and results are f32: `out[i]` for every `i < out.len()`. With AVX-512
-    /// the stream root-finder runs in f32, 16 lanes to a register (module
-    /// `stream_f32`: within ~3e-7 × max(1 m, |d|) of [`Self::signed_distance`]); else in f64,
-    /// [`LANES`] points at a time in lockstep.
+    /// points and results are f32: `out[i]` for every `i < out.len()`. With AVX-512 or
+    /// AVX2 the stream root-finder runs in f32 (modules `stream_f32` and
+    /// `stream_f32_avx2`, the same bits: within ~3e-7 × max(1 m, |d|) of
+    /// [`Self::signed_distance`]); else in f64, [`LANES`] points at a time in lockstep.
     ///
     /// With a `cap`, a point whose [`Self::distance_lower_bound`] reaches `cap` gets
     /// that bound instead of its distance (so every value below `cap` is exact, and
@@ -773,8 +773,8 @@ impl SortedPlacement {
     ) {
         #[cfg(target_arch = "x86_64")]
         {
-            type Kernel = unsafe fn(&SortedPlacement, [&[f32]; 3], Option<f32>, &mut [f32]);
-            let kernel: Option<Kernel> = match stream::kernel() {
+            type BlockF32 = unsafe fn(&SortedPlacement, [&[f32]; 3], Option<f32>, &mut [f32]);
+            let kernel: Option<BlockF32> = match stream::kernel() {
                 stream::Kernel::Avx512 => Some(stream_f32::signed_distances_block_f32),
                 stream::Kernel::Avx2 => Some(stream_f32_avx2::signed_distances_block_f32),
                 stream::Kernel::Lockstep => None,
@@ -808,9 +808,8 @@ impl SortedPlacement {
             for (i, v) in o.iter_mut().enumerate() {
                 let j = at + i;
                 let y = self.local(&[p[0][j] as f64, p[1][j] as f64, p[2][j] as f64]);
-                let lower = cap.map(|_| self.distance_lower_bound(&y));
-                match (cap, lower) {
-                    (Some(c), Some(lower)) if lower >= c => *v = lower as f32,
+                match cap.map(|c| (c, self.distance_lower_bound(&y))) {
+                    Some((c, lower)) if lower >= c => *v = lower as f32,
                     _ => {
                         near[m] = (i, y);
                         m += 1;
@@ -890,8 +889,8 @@ impl SortedPlacement {
         let base = columns.as_mut_ptr() as *mut f64;
         // SAFETY: the pointers stay inside the two buffers; a block's first m points
         // are written before slices are made of them, and its results are read only
-        // after the kernel wrote them; the CPU has AVX-512F and BMI2 (checked by the
-        // callers).
+        // after the kernel wrote them; the CPU has the kernel's instructions (the
+        // callers take it from `stream_kernel`, or the test from feature detection).
         let mut flush = |m: usize| unsafe {
             let col = |k: usize| base.add(k * BLOCK);
             let y = [0, 1, 2].map(|k| std::slice::from_raw_parts(col(k), m));
@@ -931,7 +930,7 @@ impl SortedPlacement {
     /// The first-octant closest point `x` of each local point `y` of `items`:
     /// `emit(i, y, |y|, x)`, the values `closest_sorted` gives, through the lockstep
     /// root-finder [`LANES`] points at a time (points on a coordinate plane one by one,
-    /// through the special cases). The batched queries' path without AVX-512.
+    /// through the special cases). The batched queries' path without a stream kernel.
     #[inline]
     fn closest_lockstep(
         &self,
@@ -1327,8 +1326,8 @@ mod tests {
         eprintln!("AVX2 lanes compared on {compared} groups");
     }
 
-    /// The batched distances and normals (through the AVX-512 stream where the CPU has
-    /// it) and the lockstep ones give bit for bit the one-point values, over ellipsoids
+    /// The batched distances and normals (through every stream kernel the CPU runs) and
+    /// the lockstep ones give bit for bit the one-point values, over ellipsoids
     /// from near-spherical to flat, points inside, near and far, on coordinate planes
     /// and axes, batches that are not multiples of 8 and runs longer than one block.
     #[test]

@@ -191,9 +191,9 @@ impl BodyModel {
 
     /// Signed distances (negative inside) of every point to every segment ellipsoid:
     /// `out` is N×[`NUM_SEGMENTS`] row-major. The points and results are f32, and so
-    /// is the solve where the CPU has AVX-512 (within ~3e-7 × max(1 m, |d|) of the f64 solve, see
-    /// [`SortedPlacement::signed_distances_camera_soa_f32`]); the fit uses the f64
-    /// solver.
+    /// is the solve where the CPU has AVX-512 or AVX2 (within ~3e-7 × max(1 m, |d|) of
+    /// the f64 solve, see [`SortedPlacement::signed_distances_camera_soa_f32`]); the fit
+    /// uses the f64 solver.
     pub fn distances(&self, points: &[[f32; 3]], pose: &Pose, out: &mut [f32]) -> Result<()> {
         if out.len() != points.len() * NUM_SEGMENTS {
             return Err(Error::invalid(

@@ -248,9 +248,9 @@ impl PyBodyModel {
     }
 
     /// Signed distances (N, 16) float32 of points (N, 3) to every segment ellipsoid
-    /// (negative inside), solved in single precision where the CPU has AVX-512 (within
-    /// ~3e-7 × max(1 m, |d|) of a double-precision solve). With `cap`, values are exact below `cap`
-    /// and only a lower bound (>= cap) above it, which is faster.
+    /// (negative inside), solved in single precision where the CPU has AVX-512 or AVX2
+    /// (within ~3e-7 × max(1 m, |d|) of a double-precision solve). With `cap`, values
+    /// are exact below `cap` and only a lower bound (>= cap) above it, which is faster.
     #[pyo3(signature = (points, pose, cap=None))]
     fn distances<'py>(
         &self,
