@@ -16,6 +16,23 @@ use super::{closest_sorted, SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_T
 /// Registers of 4 lanes iterated together.
 const STREAMS: usize = 4;
 
+/// For a mask of `lanes` lanes (bit l = lane l): `expand[l]` = the rank of lane l among
+/// the set lanes (0 for an unset lane), and `pack[r]` = the r-th set lane (0 past the
+/// last). The permutation tables of the AVX2 kernels are made from these.
+pub(super) const fn lane_ranks(mask: usize, lanes: usize) -> ([i32; 8], [i32; 8]) {
+    let (mut expand, mut pack) = ([0i32; 8], [0i32; 8]);
+    let (mut rank, mut lane) = (0, 0);
+    while lane < lanes {
+        if mask & (1 << lane) != 0 {
+            expand[lane] = rank as i32;
+            pack[rank] = lane as i32;
+            rank += 1;
+        }
+        lane += 1;
+    }
+    (expand, pack)
+}
+
 /// For a mask of the lanes to fill (bit l = lane l): the 32-bit source indices of
 /// `_mm256_permutevar8x32_ps` that move entries 0, 1, 2, … of a 4-double load into
 /// those lanes, in lane order (unfilled lanes take entry 0).
@@ -23,16 +40,11 @@ const EXPAND: [[i32; 8]; 16] = {
     let mut table = [[0i32; 8]; 16];
     let mut mask = 0;
     while mask < 16 {
-        let mut rank = 0;
+        let rank = lane_ranks(mask, 4).0;
         let mut lane = 0;
         while lane < 4 {
-            if mask & (1 << lane) != 0 {
-                table[mask][2 * lane] = 2 * rank;
-                table[mask][2 * lane + 1] = 2 * rank + 1;
-                rank += 1;
-            } else {
-                table[mask][2 * lane + 1] = 1;
-            }
+            table[mask][2 * lane] = 2 * rank[lane];
+            table[mask][2 * lane + 1] = 2 * rank[lane] + 1;
             lane += 1;
         }
         mask += 1;

@@ -6,6 +6,7 @@
 //! order, so both give the same bits (a test compares them where both run).
 
 use super::stream::BLOCK;
+use super::stream_avx2::lane_ranks;
 use super::stream_f32::{H_TOLERANCE_F32, ROOT_TOLERANCE_F32};
 use super::{SortedPlacement, MAX_ITERATIONS};
 
@@ -15,41 +16,23 @@ const STREAMS: usize = 4;
 /// For a mask of the lanes to fill: the source index of each lane for
 /// `_mm256_permutevar8x32_ps`, moving entries 0, 1, 2, … of an 8-float load into the
 /// set lanes in order (other lanes take entry 0).
-const EXPAND: [[i32; 8]; 256] = {
-    let mut table = [[0i32; 8]; 256];
-    let mut mask = 0;
-    while mask < 256 {
-        let (mut rank, mut lane) = (0, 0);
-        while lane < 8 {
-            if mask & (1 << lane) != 0 {
-                table[mask][lane] = rank;
-                rank += 1;
-            }
-            lane += 1;
-        }
-        mask += 1;
-    }
-    table
-};
+const EXPAND: [[i32; 8]; 256] = ranks_table(false);
 
 /// For a mask of lanes to keep: the source lane of each output position, packing the
 /// set lanes to the front in order (the rest take lane 0).
-const PACK: [[i32; 8]; 256] = {
+const PACK: [[i32; 8]; 256] = ranks_table(true);
+
+/// [`lane_ranks`] of every 8-lane mask: its `pack` half, or its `expand` half.
+const fn ranks_table(pack: bool) -> [[i32; 8]; 256] {
     let mut table = [[0i32; 8]; 256];
     let mut mask = 0;
     while mask < 256 {
-        let (mut rank, mut lane) = (0, 0);
-        while lane < 8 {
-            if mask & (1 << lane) != 0 {
-                table[mask][rank] = lane;
-                rank += 1;
-            }
-            lane += 1;
-        }
+        let (expand, packed) = lane_ranks(mask, 8);
+        table[mask] = if pack { packed } else { expand };
         mask += 1;
     }
     table
-};
+}
 
 /// [`super::stream_f32::signed_distances_block_f32`] with AVX2 (same contract).
 ///
