@@ -74,13 +74,19 @@ fn bench_maxflow(c: &mut Criterion) {
                 "{w}x{h} {conn}-connected: {:.1} bytes/node",
                 g.memory_bytes() as f64 / (h * w) as f64
             );
-            c.bench_function(&format!("maxflow_grid{conn}_{w}x{h}"), |b| {
-                b.iter_batched(
-                    || g.clone(),
-                    |mut g| black_box(g.maxflow()),
-                    BatchSize::LargeInput,
-                )
-            });
+            // All of the pool's threads (row bands solved in parallel, then joined),
+            // then one thread.
+            for (threads, suffix) in [(0, ""), (1, "_1thread")] {
+                let mut g = g.clone();
+                g.set_max_threads(threads);
+                c.bench_function(&format!("maxflow_grid{conn}_{w}x{h}{suffix}"), |b| {
+                    b.iter_batched(
+                        || g.clone(),
+                        |mut g| black_box(g.maxflow()),
+                        BatchSize::LargeInput,
+                    )
+                });
+            }
         }
     }
     c.bench_function("build_grid4_640x480", |b| {

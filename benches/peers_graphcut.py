@@ -98,19 +98,32 @@ def bench_maxflow(rows, reps: int) -> None:
 
             t_ob, _ = best_time(lambda: ours_build, reps)
             t_pb, _ = best_time(lambda: peer_build, reps)
-            # Interleaved (ours, peer) pairs: the machine's speed drifts between runs,
-            # so each pair shares the conditions; best times and the median pair ratio.
-            pairs = []
+
+            def ours_one_thread():
+                g = ours_build()
+                return lambda: g.maxflow(threads=1)
+
+            # Interleaved (ours, ours on one thread, peer) triples: the machine's speed
+            # drifts between runs, so each triple shares the conditions; best times and
+            # the median ratios within triples. Ours uses all of the pool's threads (row
+            # bands in parallel); the CPU time of that solve is reported too.
+            pairs, singles, cpu = [], [], []
             for _ in range(reps):
-                pairs.append(
-                    (
-                        best_time(lambda: ours_build().maxflow, 1),
-                        best_time(lambda: peer_build().maxflow, 1),
-                    )
-                )
+                g = ours_build()
+                c0, t0 = time.process_time(), time.perf_counter()
+                flow = g.maxflow()
+                ours = (time.perf_counter() - t0, flow)
+                cpu.append(time.process_time() - c0)
+                one = best_time(ours_one_thread, 1)
+                peer = best_time(lambda: peer_build().maxflow, 1)
+                pairs.append((ours, peer))
+                singles.append(one[0])
             t_o, f_o = min(o for o, _ in pairs)[0], pairs[0][0][1]
             t_p, f_p = min(p for _, p in pairs)[0], pairs[0][1][1]
             med_ratio = float(np.median([o[0] / p[0] for o, p in pairs]))
+            t_1 = min(singles)
+            peer_times = [p[0] for _, p in pairs]
+            med_ratio_1 = float(np.median(np.array(singles) / np.array(peer_times)))
             g_o = ours_build()
             g_o.maxflow()
             g_p = peer_build()
@@ -136,7 +149,10 @@ def bench_maxflow(rows, reps: int) -> None:
                     f"maxflow {conn}-conn {w}x{h}",
                     t_o,
                     t_p,
-                    f"median pair ratio {med_ratio:.2f}, flow {f_o:.6f} vs {f_p:.6f} "
+                    f"median pair ratio {med_ratio:.2f}; one thread {t_1 * 1e3:.2f} ms,"
+                    f" ratio {t_1 / t_p:.2f}, median {med_ratio_1:.2f};"
+                    f" CPU time {min(cpu) * 1e3:.1f} ms (median {np.median(cpu) * 1e3:.1f});"
+                    f" flow {f_o:.6f} vs {f_p:.6f} "
                     f"(rel {abs(f_o - f_p) / max(abs(f_p), 1e-12):.1e}),"
                     f" labels differ {int((seg_o != seg_p).sum())},"
                     f" build {t_ob * 1e3:.1f} vs {t_pb * 1e3:.1f} ms,"

@@ -112,6 +112,36 @@ def test_grid_edges_and_fast_large_build():
     assert build_s < 5.0  # generous bound for a loaded CI machine; benches measure speed
 
 
+@pytest.mark.parametrize("conn", [4, 8])
+def test_threaded_solve_matches_one_thread(conn):
+    # A 320×240 grid is split into row bands, one per thread (when the pool has more
+    # than one); integer capacities: the flow must be exactly the one-thread solve's,
+    # the cut identical, and a dynamic update afterwards must agree too.
+    rng = np.random.default_rng(11)
+    h, w = 240, 320
+    e = gc.grid_edges(h, w, conn)
+    wts = rng.integers(0, 20, size=len(e))
+    src, snk = rng.integers(0, 30, size=h * w), rng.integers(0, 30, size=h * w)
+    nodes = np.arange(h * w)
+    flows, cuts, graphs = [], [], []
+    for threads in (1, None, 2, 64):
+        g = gc.Graph(h * w, dtype=int, edge_hint=len(e))
+        g.add_edges(e[:, 0], e[:, 1], wts, wts)
+        g.add_terminal_edges(nodes, src, snk)
+        flows.append(g.maxflow(threads=threads))
+        cuts.append(g.segments())
+        graphs.append(g)
+    assert all(f == flows[0] for f in flows) and isinstance(flows[0], int)
+    assert all(np.array_equal(c, cuts[0]) for c in cuts)
+    delta = rng.integers(-10, 10, size=500)
+    changed = rng.choice(h * w, size=500, replace=False)
+    after = []
+    for g in graphs:
+        g.update_terminal_edges(changed, np.maximum(delta, 0), np.maximum(-delta, 0))
+        after.append((g.maxflow(), g.segments()))
+    assert all(f == after[0][0] and np.array_equal(c, after[0][1]) for f, c in after)
+
+
 def potts_problem(rng, n, l, m):
     unary = rng.integers(0, 20, size=(n, l))
     edges = rng.integers(0, n, size=(m, 2))
@@ -209,6 +239,7 @@ def test_graph_bad_input():
     _raises("dtype", gc.Graph, 3, dtype=str)
     _raises("connectivity", gc.grid_edges, 3, 3, connectivity=6)
     _raises("h", gc.grid_edges, 0, 3)
+    _raises("threads", gc.Graph(4).maxflow, threads=0)
     assert issubclass(InvalidInputError, DepthPoseError)
     assert issubclass(InvalidInputError, ValueError)
 

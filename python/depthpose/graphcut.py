@@ -76,9 +76,15 @@ class Graph:
         ``maxflow()`` times the solve alone."""
         self._g.finalize()
 
-    def maxflow(self) -> Number:
-        """The maximum flow value (int for an int graph)."""
-        return self._g.maxflow()  # type: ignore[no-any-return]
+    def maxflow(self, threads: int | None = None) -> Number:
+        """The maximum flow value (int for an int graph).
+
+        A fresh solve of a large graph whose edges join nearby node ids (a pixel grid)
+        is split into row bands solved on up to ``threads`` threads (default: all of
+        the pool's, see ``RAYON_NUM_THREADS``), then joined by one more search; the cut
+        is the same for any ``threads``, a float flow value may differ in the last bits.
+        """
+        return self._g.maxflow(threads)  # type: ignore[no-any-return]
 
     def segments(self) -> np.ndarray:
         """Bool array (n_nodes,): True for nodes on the sink side of the minimum cut."""

@@ -276,7 +276,23 @@ impl PyGraph {
     }
 
     /// Computes the maximum flow; returns its value (float, or int for an int graph).
-    fn maxflow(&mut self, py: Python<'_>) -> PyResult<Py<PyAny>> {
+    /// A fresh solve of a large grid uses up to `threads` threads (None: all of the
+    /// pool's); the cut does not depend on it.
+    #[pyo3(signature = (threads=None))]
+    fn maxflow(&mut self, py: Python<'_>, threads: Option<i64>) -> PyResult<Py<PyAny>> {
+        let threads = match threads {
+            None => 0,
+            Some(t) if t >= 1 => t as usize,
+            Some(t) => {
+                return Err(
+                    Error::invalid("threads", format!("must be at least 1, got {t}")).into(),
+                )
+            }
+        };
+        match &mut self.inner {
+            Inner::F(g) => g.set_max_threads(threads),
+            Inner::I(g) => g.set_max_threads(threads),
+        }
         Ok(match &mut self.inner {
             Inner::F(g) => py
                 .detach(|| g.maxflow())
