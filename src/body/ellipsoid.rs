@@ -628,6 +628,17 @@ impl SortedPlacement {
         self.sorted.e[2]
     }
 
+    /// The camera-frame point with coordinates `u` along the sorted axes scaled by the
+    /// half-axes: a point of the surface when `u` is a unit vector (the same body point
+    /// at every pose).
+    #[inline]
+    pub fn surface_point(&self, u: &[f64; 3]) -> [f64; 3] {
+        let (e, a) = (&self.sorted.e, &self.axes);
+        std::array::from_fn(|c| {
+            self.centre[c] + e[0] * u[0] * a[0][c] + e[1] * u[1] * a[1][c] + e[2] * u[2] * a[2][c]
+        })
+    }
+
     /// Coordinates of camera-frame point `p` along the sorted axes (signed).
     #[inline]
     pub fn local(&self, p: &[f64; 3]) -> [f64; 3] {

@@ -23,6 +23,7 @@
 //! unary term, so the energy trace stays non-increasing across the schedule too. The
 //! full energy is evaluated after every step and a step that would raise it is undone.
 
+use super::free_space::{FreeSpaceCost, FreeSpaceImage, FreeSpaceTerm};
 use super::lm::{LevenbergMarquardt, LmConfig, PosePrior, WithPrior};
 use super::objective::{Loss, PointCost, PointObjective, CHUNK_POINTS};
 use crate::body::residuals::{to_f64, PoseGeometry};
@@ -38,6 +39,9 @@ pub const OUTLIER: i32 = NUM_SEGMENTS as i32;
 pub const NUM_LABELS: usize = NUM_SEGMENTS + 1;
 /// Edge lengths below this (m) are treated as this (coincident points).
 const MIN_EDGE_LENGTH: f64 = 1e-4;
+
+/// Default weight of the free-space term ([`EmConfig::free_space_weight`]).
+pub const DEFAULT_FREE_SPACE_WEIGHT: f64 = 3.0;
 
 /// Settings of [`hard_em`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -68,6 +72,13 @@ pub struct EmConfig {
     pub energy_tolerance: f64,
     /// Alpha-expansion cycles per E-step.
     pub expansion_cycles: usize,
+    /// Weight λ of the free-space term (one surface sample against one point; 0 turns
+    /// it off; see [`super::free_space`]). Used when the fit has the depth image.
+    pub free_space_weight: f64,
+    /// Depth (m) a model sample may lie in front of the observed surface for free.
+    pub free_space_margin: f64,
+    /// Truncation (m) of the free-space residuals.
+    pub free_space_truncation: f64,
     /// The M-step's LM settings.
     pub lm: LmConfig,
 }
@@ -88,6 +99,9 @@ impl Default for EmConfig {
             label_change_tolerance: 0.002,
             energy_tolerance: 1e-4,
             expansion_cycles: 3,
+            free_space_weight: DEFAULT_FREE_SPACE_WEIGHT,
+            free_space_margin: 0.03,
+            free_space_truncation: 0.05,
             lm: LmConfig {
                 // The EM loop re-linearises after every E-step anyway; a few LM
                 // iterations per M-step fit the shared sequences better and faster.
@@ -155,6 +169,17 @@ impl EmConfig {
         ensure(self.expansion_cycles > 0, "expansion_cycles", || {
             "must be at least 1".to_string()
         })?;
+        ensure(nonneg(self.free_space_weight), "free_space_weight", || {
+            format!("must be finite and >= 0, got {}", self.free_space_weight)
+        })?;
+        ensure(nonneg(self.free_space_margin), "free_space_margin", || {
+            format!("must be finite and >= 0, got {}", self.free_space_margin)
+        })?;
+        ensure(
+            pos(self.free_space_truncation),
+            "free_space_truncation",
+            || format!("must be finite and > 0, got {}", self.free_space_truncation),
+        )?;
         self.lm.validate()
     }
 
@@ -172,6 +197,17 @@ impl EmConfig {
             sigma: self.sigma,
             loss: self.loss,
             truncation: self.truncation_factor * tau,
+        }
+    }
+
+    /// The free-space term's settings, its weight scaled by `weight_scale` (a
+    /// sub-sampled fit has fewer points per sample).
+    pub fn free_space_cost(&self, weight_scale: f64) -> FreeSpaceCost {
+        FreeSpaceCost {
+            weight: self.free_space_weight * weight_scale,
+            margin: self.free_space_margin,
+            sigma: self.sigma,
+            truncation: self.free_space_truncation,
         }
     }
 
@@ -715,7 +751,7 @@ pub fn hard_em(
     prior: Option<&PosePrior>,
     config: &EmConfig,
 ) -> Result<EmResult> {
-    hard_em_from(model, points, graph, init, None, prior, config)
+    hard_em_from(model, points, graph, init, None, prior, None, config)
 }
 
 /// An EM run to continue (see [`hard_em_from`]): the per-point labels it ended with
@@ -730,7 +766,10 @@ pub struct EmResume<'a> {
 /// ended with) and its labels, at its iteration count (so τ continues its annealing
 /// and `max_iterations` counts the earlier iterations too), without a new initial
 /// E-step. Continuing a run that stopped at its iteration limit gives the run that
-/// would have gone on.
+/// would have gone on. With `free_space` (the depth image the points came from) and a
+/// positive [`EmConfig::free_space_weight`], the M-step and the energy include the
+/// free-space term ([`super::free_space`]).
+#[allow(clippy::too_many_arguments)]
 pub fn hard_em_from(
     model: &BodyModel,
     points: &[[f32; 3]],
@@ -738,9 +777,33 @@ pub fn hard_em_from(
     init: &Pose,
     resume: Option<EmResume<'_>>,
     prior: Option<&PosePrior>,
+    free_space: Option<FreeSpaceImage<'_>>,
     config: &EmConfig,
 ) -> Result<EmResult> {
     config.validate()?;
+    if let Some(f) = &free_space {
+        let (w, h) = (f.camera.width, f.camera.height);
+        if f.depth.len() != w * h {
+            return Err(Error::invalid(
+                "depth",
+                format!(
+                    "has {} readings, the camera's {h}x{w} image {}",
+                    f.depth.len(),
+                    w * h
+                ),
+            ));
+        }
+    }
+    let free_space = free_space
+        .filter(|f| config.free_space_weight > 0.0 && f.weight_scale > 0.0)
+        .map(|f| {
+            FreeSpaceTerm::new(
+                model,
+                f.depth,
+                f.camera,
+                config.free_space_cost(f.weight_scale),
+            )
+        });
     let n = points.len();
     if n == 0 {
         return Err(Error::NoBody("no foreground points to fit".into()));
@@ -753,7 +816,10 @@ pub fn hard_em_from(
     }
     let mut crf = EStep::new(graph, n, config)?;
     let mut lm = LevenbergMarquardt::new(config.lm)?;
-    let prior_cost = |p: &Pose| prior.map_or(0.0, |pr| pr.cost(p));
+    // The pose-only terms of the energy: the prior and the free space.
+    let prior_cost = |p: &Pose| {
+        prior.map_or(0.0, |pr| pr.cost(p)) + free_space.as_ref().map_or(0.0, |f| f.cost(p))
+    };
 
     let mut pose = BodyModel::clamp_pose(init);
     let mut iterations = resume.map_or(0, |r| r.iterations);
@@ -804,6 +870,7 @@ pub fn hard_em_from(
             let mut with_prior = WithPrior {
                 objective: &mut objective,
                 prior,
+                free_space: free_space.as_ref(),
             };
             lm.minimize(&mut with_prior, &mut new_pose)
         };

@@ -11,6 +11,7 @@
 //! are held fixed for the step (a projected / active-set LM), so a joint at its limit
 //! does not block the others. The cost therefore never increases.
 
+use super::free_space::FreeSpaceTerm;
 use crate::body::{pose_with_root_increment, root_rotation, BodyModel, Pose, NUM_PARAMS};
 use crate::error::{ensure, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -221,19 +222,23 @@ impl PosePrior {
     }
 }
 
-/// An objective plus an optional prior.
+/// An objective plus an optional prior and an optional free-space term.
 pub struct WithPrior<'a, O: PoseObjective> {
     pub objective: &'a mut O,
     pub prior: Option<&'a PosePrior>,
+    pub free_space: Option<&'a FreeSpaceTerm<'a>>,
 }
 
 impl<O: PoseObjective> PoseObjective for WithPrior<'_, O> {
     fn cost(&mut self, pose: &Pose) -> f64 {
-        self.objective.cost(pose) + self.prior.map_or(0.0, |p| p.cost(pose))
+        self.objective.cost(pose)
+            + self.prior.map_or(0.0, |p| p.cost(pose))
+            + self.free_space.map_or(0.0, |f| f.cost(pose))
     }
     fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
         let c = self.objective.normal_equations(pose, h, g);
         c + self.prior.map_or(0.0, |p| p.add_to(pose, h, g))
+            + self.free_space.map_or(0.0, |f| f.add_to(pose, h, g))
     }
 }
 
@@ -547,6 +552,7 @@ mod tests {
         let mut obj = WithPrior {
             objective: &mut bowl,
             prior: Some(&prior),
+            free_space: None,
         };
         let mut lm = LevenbergMarquardt::new(LmConfig::default()).unwrap();
         let mut pose = BodyModel::neutral_pose();

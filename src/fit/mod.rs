@@ -6,6 +6,7 @@
 //! joints, per-pixel part labels and diagnostics.
 
 pub mod em;
+pub mod free_space;
 pub mod ik;
 pub mod lm;
 pub mod objective;
@@ -15,6 +16,7 @@ use crate::body::{pose_from_slice, BodyModel, Pose, NUM_JOINTS, NUM_SEGMENTS};
 use crate::camera::Camera;
 use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView, PixelGraph};
 use crate::error::{Error, Result};
+use free_space::{FreeSpaceImage, FreeSpaceTerm};
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
@@ -171,9 +173,13 @@ pub struct FitProblem {
     config: FitConfig,
     cloud: Cloud,
     graph: PixelGraph,
+    /// The whole depth image (background included) for the free-space term; empty
+    /// when the term is off.
+    depth: Vec<f32>,
     /// With `stride > 1` (and enough sub-sampled points): the sub-sampled cloud, its
-    /// camera and graph.
-    sub: Option<(Cloud, Camera, PixelGraph)>,
+    /// camera and graph, and the sub-sampled depth image (empty when the free-space
+    /// term is off).
+    sub: Option<(Cloud, Camera, PixelGraph, Vec<f32>)>,
 }
 
 impl FitProblem {
@@ -202,18 +208,34 @@ impl FitProblem {
             let sub_cloud = Cloud::from_depth(&sub_view, &sub_cam, sub_mask.as_deref())?;
             (sub_cloud.len() >= MIN_POINTS).then(|| {
                 let sub_graph = neighbour_graph(&sub_cloud, config.connectivity);
-                (sub_cloud, sub_cam, sub_graph)
+                let sub_depth = if config.em.free_space_weight > 0.0 {
+                    sub_depth
+                } else {
+                    Vec::new()
+                };
+                (sub_cloud, sub_cam, sub_graph, sub_depth)
             })
         } else {
             None
         };
+        let free_space = config.em.free_space_weight > 0.0;
         Ok(FitProblem {
             camera: *camera,
             config: *config,
             cloud,
             graph,
+            depth: if free_space {
+                depth.to_vec()
+            } else {
+                Vec::new()
+            },
             sub,
         })
+    }
+
+    /// The whole image for the free-space term (None when it is off).
+    fn free_space_depth(&self) -> Option<&[f32]> {
+        (!self.depth.is_empty()).then_some(&self.depth[..])
     }
 
     /// Fits `model` from `init` with an optional prior toward a pose.
@@ -252,7 +274,7 @@ impl FitProblem {
                 .iter()
                 .map(|&px| label(px as usize))
                 .collect(),
-            Some((sub_cloud, sub_cam, _)) => {
+            Some((sub_cloud, sub_cam, _, _)) => {
                 let s = self.config.stride;
                 let sw = sub_cam.width;
                 sub_cloud
@@ -284,8 +306,22 @@ impl FitProblem {
                 labels,
                 iterations: r.iterations,
             });
-        let Some((sub_cloud, sub_cam, sub_graph)) = &self.sub else {
-            let em = hard_em_from(model, &cloud.points, graph, init, resume, prior, &config.em)?;
+        let Some((sub_cloud, sub_cam, sub_graph, sub_depth)) = &self.sub else {
+            let free_space = self.free_space_depth().map(|depth| FreeSpaceImage {
+                depth,
+                camera: &self.camera,
+                weight_scale: 1.0,
+            });
+            let em = hard_em_from(
+                model,
+                &cloud.points,
+                graph,
+                init,
+                resume,
+                prior,
+                free_space,
+                &config.em,
+            )?;
             let labels = label_image(cloud, &em.labels);
             return Ok(FitResult::from_em(model, em, labels));
         };
@@ -296,6 +332,12 @@ impl FitProblem {
             weights: p.weights.map(|w| w / (s * s) as f64),
             ..*p
         });
+        // The same for the free-space term: its samples do not thin out with the stride.
+        let free_space = (!sub_depth.is_empty()).then_some(FreeSpaceImage {
+            depth: sub_depth,
+            camera: sub_cam,
+            weight_scale: 1.0 / (s * s) as f64,
+        });
         let em = hard_em_from(
             model,
             &sub_cloud.points,
@@ -303,6 +345,7 @@ impl FitProblem {
             init,
             resume,
             scaled_prior.as_ref(),
+            free_space,
             &config.em,
         )?;
         if !config.label_all_pixels {
@@ -329,7 +372,7 @@ impl FitProblem {
         result: &FitResult,
         prior: Option<&PosePrior>,
     ) -> Result<FitResult> {
-        let Some((sub_cloud, sub_cam, _)) = &self.sub else {
+        let Some((sub_cloud, sub_cam, _, _)) = &self.sub else {
             return Ok(result.clone());
         };
         let labels = self.resume_labels(result)?;
@@ -404,7 +447,11 @@ impl FitProblem {
             &final_em,
         )?;
         // The full-resolution labelling's energy and counts replace the EM's.
-        let energy = crf + prior.map_or(0.0, |p| p.cost(&em.pose));
+        let free_space = self.free_space_depth().map(|depth| {
+            let cost = config.em.free_space_cost(1.0);
+            FreeSpaceTerm::new(model, depth, &self.camera, cost).cost(&em.pose)
+        });
+        let energy = crf + prior.map_or(0.0, |p| p.cost(&em.pose)) + free_space.unwrap_or(0.0);
         let labels = label_image(cloud, &final_labels.labels);
         Ok(FitResult {
             energy,

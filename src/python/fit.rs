@@ -33,6 +33,9 @@ pub struct PyFitConfig {
     label_change_tolerance: f64,
     energy_tolerance: f64,
     expansion_cycles: usize,
+    free_space_weight: f64,
+    free_space_margin: f64,
+    free_space_truncation: f64,
     lm_max_iterations: usize,
     connectivity: u32,
     stride: usize,
@@ -67,6 +70,9 @@ impl PyFitConfig {
             label_change_tolerance: self.label_change_tolerance,
             energy_tolerance: self.energy_tolerance,
             expansion_cycles: self.expansion_cycles,
+            free_space_weight: self.free_space_weight,
+            free_space_margin: self.free_space_margin,
+            free_space_truncation: self.free_space_truncation,
             lm: fit::LmConfig {
                 max_iterations: self.lm_max_iterations,
                 ..d.lm
@@ -106,7 +112,8 @@ impl PyFitConfig {
         contrast_weight=None, contrast_sigma=None, outlier_distance=None,
         outlier_distance_start=None, anneal_iterations=None, truncation_factor=None,
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
-        expansion_cycles=None, lm_max_iterations=None, connectivity=4, stride=1,
+        expansion_cycles=None, free_space_weight=None, free_space_margin=None,
+        free_space_truncation=None, lm_max_iterations=None, connectivity=4, stride=1,
         label_all_pixels=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -124,6 +131,9 @@ impl PyFitConfig {
         label_change_tolerance: Option<f64>,
         energy_tolerance: Option<f64>,
         expansion_cycles: Option<i64>,
+        free_space_weight: Option<f64>,
+        free_space_margin: Option<f64>,
+        free_space_truncation: Option<f64>,
         lm_max_iterations: Option<i64>,
         connectivity: i64,
         stride: i64,
@@ -152,6 +162,9 @@ impl PyFitConfig {
             label_change_tolerance: label_change_tolerance.unwrap_or(d.label_change_tolerance),
             energy_tolerance: energy_tolerance.unwrap_or(d.energy_tolerance),
             expansion_cycles: count(expansion_cycles, d.expansion_cycles, "expansion_cycles")?,
+            free_space_weight: free_space_weight.unwrap_or(d.free_space_weight),
+            free_space_margin: free_space_margin.unwrap_or(d.free_space_margin),
+            free_space_truncation: free_space_truncation.unwrap_or(d.free_space_truncation),
             lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
             connectivity: u32::try_from(connectivity).unwrap_or(0),
             stride: usize::try_from(stride).unwrap_or(0),
