@@ -2292,6 +2292,15 @@ mod tests {
                 b.add_tweights(i, s, t).unwrap();
             }
             prop_assert_eq!(b.maxflow(), brute_min_cut(&p));
+            // Split into parts: arcs whose sister sits in the overflow table, across
+            // and within parts.
+            for k in 2..4 {
+                let mut g = graph_of(&p);
+                g.force_parts(k);
+                prop_assert_eq!(g.maxflow(), brute_min_cut(&p));
+                check_flow(&p, &g, true);
+                g.check_trees();
+            }
         }
     }
 
