@@ -3,7 +3,7 @@
 //! One module per pipeline stage (see `DESIGN.md` in the shared folder and the README):
 //! camera → cloud (points, normals, neighbours, foreground) → stereo → body model →
 //! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
-//! [`python`] behind the `python` feature; algorithms never live there.
+//! `python` behind the `python` feature; algorithms never live there.
 
 /// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
 /// has it (detected at run time), and the portable build otherwise. The body is an

@@ -110,7 +110,7 @@ fn solve_secular<const N: usize>(a: &[f64; N], b: &[f64; N], mut lo: f64, mut hi
 }
 
 /// Queries solved together by [`SortedPlacement::signed_distances_batched`]: two AVX2
-/// registers of four (see [`solve_secular_lanes`]).
+/// registers of four (see `solve_secular_lanes`).
 pub const LANES: usize = 8;
 const _: () = assert!(
     LANES.is_multiple_of(4),

@@ -30,7 +30,7 @@
 //! # Root rotation increments
 //! The least-squares Jacobians ([`BodyModel::residuals_and_jacobian`],
 //! [`BodyModel::joints_jacobian`]) give columns 3..6 with respect to a **local rotation
-//! increment** ω (body-frame axes): R ← R · exp([ω]×), not with respect to the rotation
+//! increment** ω (body-frame axes): R ← R · exp(\[ω\]×), not with respect to the rotation
 //! vector itself. Apply an LM step to a pose with [`pose_with_root_increment`].
 
 pub mod ellipsoid;
@@ -737,7 +737,7 @@ pub fn root_rotation(pose: &Pose) -> Rotation3<f64> {
     ))
 }
 
-/// `pose` with its root rotation R replaced by R · exp([omega]×) (a body-frame
+/// `pose` with its root rotation R replaced by R · exp(\[omega\]×) (a body-frame
 /// increment, the meaning of the Jacobian's columns 3..6) and written back as a
 /// rotation vector.
 pub fn pose_with_root_increment(pose: &Pose, omega: &Vector3<f64>) -> Pose {

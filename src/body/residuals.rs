@@ -254,7 +254,7 @@ impl BodyModel {
     /// Residuals and Jacobian of the fit: for a point with label k ≥ 0 the residual is
     /// its signed distance to segment k's ellipsoid and its Jacobian row is
     /// d(residual)/d(pose) (22 columns; root rotation columns with respect to the
-    /// body-frame increment ω, R ← R·exp([ω]×)). Points with label −1 get a zero
+    /// body-frame increment ω, R ← R·exp(\[ω\]×)). Points with label −1 get a zero
     /// residual and a zero row. `jacobian_out` is N×22 row-major.
     pub fn residuals_and_jacobian(
         &self,
