@@ -227,6 +227,29 @@ fn solve_secular_lanes(
     solve_secular_lanes_portable(a, b, lo, hi)
 }
 
+/// `reciprocals(u, b)` on four lanes: 1/(u + b_k) for k = 0, 1, 2 through the prefix
+/// products, with the scalar code's operations in its order (so bit-identical to it).
+/// Shared by the AVX2 lockstep and the AVX2 stream's passes and finish.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn reciprocals_avx2(
+    u: std::arch::x86_64::__m256d,
+    b: [std::arch::x86_64::__m256d; 3],
+) -> [std::arch::x86_64::__m256d; 3] {
+    use std::arch::x86_64::*;
+    let (t0, t1, t2) = (
+        _mm256_add_pd(u, b[0]),
+        _mm256_add_pd(u, b[1]),
+        _mm256_add_pd(u, b[2]),
+    );
+    let p01 = _mm256_mul_pd(t0, t1);
+    let inv = _mm256_div_pd(_mm256_set1_pd(1.0), _mm256_mul_pd(p01, t2));
+    let r2 = _mm256_mul_pd(inv, p01);
+    let inv = _mm256_mul_pd(inv, t2);
+    [_mm256_mul_pd(inv, t1), _mm256_mul_pd(inv, t0), r2]
+}
+
 /// The AVX2 body of [`solve_secular_lanes`]: each step of `solve_secular` on all lanes
 /// at once, four per register, the registers interleaved (each step's division and
 /// square root have a long latency; independent registers overlap them). A finished
@@ -275,19 +298,8 @@ unsafe fn solve_secular_lanes_avx2(
     for _ in 0..MAX_ITERATIONS {
         let mut any = 0;
         for g in 0..REGS {
-            // `reciprocals(u, b)`: 1/(u + b_k) through the prefix products.
             let u = &mut u[g];
-            let (t0, t1, t2) = (
-                _mm256_add_pd(*u, b0),
-                _mm256_add_pd(*u, b1),
-                _mm256_add_pd(*u, b2),
-            );
-            let p01 = _mm256_mul_pd(t0, t1);
-            let inv = _mm256_div_pd(one, _mm256_mul_pd(p01, t2));
-            let r2 = _mm256_mul_pd(inv, p01);
-            let inv = _mm256_mul_pd(inv, t2);
-            let r1 = _mm256_mul_pd(inv, t0);
-            let r0 = _mm256_mul_pd(inv, t1);
+            let [r0, r1, r2] = reciprocals_avx2(*u, [b0, b1, b2]);
             let sq = |v: __m256d| _mm256_mul_pd(v, v);
             let (q0, q1, q2) = (
                 sq(_mm256_mul_pd(a0[g], r0)),

@@ -11,7 +11,9 @@
 //! code (a test checks it).
 
 use super::stream::BLOCK;
-use super::{closest_sorted, SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_TOLERANCE};
+use super::{
+    closest_sorted, reciprocals_avx2, SortedPlacement, H_TOLERANCE, MAX_ITERATIONS, ROOT_TOLERANCE,
+};
 
 /// Registers of 4 lanes iterated together.
 const STREAMS: usize = 4;
@@ -216,6 +218,8 @@ pub unsafe fn distances_block<const NORMALS: bool>(
         if going.iter().all(|&g| g == 0) {
             break;
         }
+        // `reciprocals_avx2` written out operation by operation over the registers, so
+        // that their dependency chains interleave (see the AVX-512 kernel).
         let t0 = each(|g| _mm256_add_pd(u[g], b0));
         let t1 = each(|g| _mm256_add_pd(u[g], b1));
         let t2 = each(|g| _mm256_add_pd(u[g], b2));
@@ -297,17 +301,7 @@ pub unsafe fn distances_block<const NORMALS: bool>(
         let mask = _mm256_castpd_si256(lane_mask(m));
         let from = |q: *const f64| _mm256_loadu_pd(q.add(base));
         let u = _mm256_maskload_pd(roots.add(base), mask);
-        let (t0, t1, t2) = (
-            _mm256_add_pd(u, b0),
-            _mm256_add_pd(u, b1),
-            _mm256_add_pd(u, b2),
-        );
-        let p01 = _mm256_mul_pd(t0, t1);
-        let inv = _mm256_div_pd(one, _mm256_mul_pd(p01, t2));
-        let r2 = _mm256_mul_pd(inv, p01);
-        let inv = _mm256_mul_pd(inv, t2);
-        let r1 = _mm256_mul_pd(inv, t0);
-        let r0 = _mm256_mul_pd(inv, t1);
+        let [r0, r1, r2] = reciprocals_avx2(u, [b0, b1, b2]);
         let closest =
             |k: usize, r: __m256d| _mm256_mul_pd(_mm256_mul_pd(splat(c.e[k]), from(qa[k])), r);
         let x = [closest(0, r0), closest(1, r1), closest(2, r2)];
