@@ -817,7 +817,7 @@ pub fn hard_em_from(
     let mut crf = EStep::new(graph, n, config)?;
     let mut lm = LevenbergMarquardt::new(config.lm)?;
     // The pose-only terms of the energy: the prior and the free space.
-    let prior_cost = |p: &Pose| {
+    let pose_cost = |p: &Pose| {
         prior.map_or(0.0, |pr| pr.cost(p)) + free_space.as_ref().map_or(0.0, |f| f.cost(p))
     };
 
@@ -852,7 +852,7 @@ pub fn hard_em_from(
             crf.expand(model, points, config, &cheapest)?
         }
     };
-    let mut energy = crf.energy(&labels) + prior_cost(&pose);
+    let mut energy = crf.energy(&labels) + pose_cost(&pose);
     let mut trace = vec![energy];
     let mut termination = EmTermination::MaxIterations;
     let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
@@ -881,7 +881,7 @@ pub fn hard_em_from(
         let next_tau = config.outlier_distance_at(iterations);
         if pose_moved {
             crf.set_pose(model, points, &new_pose, config, next_tau, Some(&labels));
-            let e = crf.energy(&labels) + prior_cost(&new_pose);
+            let e = crf.energy(&labels) + pose_cost(&new_pose);
             if e <= energy {
                 pose = new_pose;
                 energy = e;
@@ -895,7 +895,7 @@ pub fn hard_em_from(
         if next_tau != tau {
             tau = next_tau;
             crf.set_pose(model, points, &pose, config, tau, Some(&labels));
-            energy = crf.energy(&labels) + prior_cost(&pose);
+            energy = crf.energy(&labels) + pose_cost(&pose);
         }
         // E-step.
         let new_labels = crf.expand(model, points, config, &labels)?;
@@ -904,7 +904,7 @@ pub fn hard_em_from(
             .zip(&labels)
             .filter(|(a, b)| a != b)
             .count();
-        let e = crf.energy(&new_labels) + prior_cost(&pose);
+        let e = crf.energy(&new_labels) + pose_cost(&pose);
         if e <= energy {
             labels = new_labels;
             energy = e;

@@ -1167,11 +1167,16 @@ impl<C: Capacity> Graph<C> {
         } else {
             // Only the trees of this solve are not free from here on.
             self.bounded = true;
+            let parts = if seeds.is_none() {
+                self.parallel_parts()
+            } else {
+                1
+            };
             match seeds {
                 Some(seeds) if self.clean => self.init_seeded(seeds),
-                None if self.parallel_parts() > 1 => {
+                None if parts > 1 => {
                     self.clean = false;
-                    self.solve_in_parts(self.parallel_parts());
+                    self.solve_in_parts(parts);
                     self.trees_valid = true;
                     return self.flow;
                 }
@@ -1253,14 +1258,13 @@ impl<C: Capacity> Graph<C> {
                     std::mem::take(&mut arcs_rest),
                 )
             };
-            parts.push((nodes, arcs, p));
+            parts.push((nodes, arcs, p, len));
         }
         let overflow: &[(u32, u32)] = &self.overflow;
         let max_time = self.max_time;
         let results: Vec<(C, u32, bool)> = parts
             .into_par_iter()
-            .map(|(nodes, arcs, p)| {
-                let len = bounds[p + 1] - bounds[p];
+            .map(|(nodes, arcs, p, len)| {
                 let mut s = Search::<C, true> {
                     nodes,
                     arcs,
