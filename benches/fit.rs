@@ -49,6 +49,38 @@ fn bench(c: &mut Criterion) {
     g.bench_function("em_frame_320x240", |b| {
         b.iter(|| hard_em(&model, &cloud.points, &graph, black_box(&init), None, &cfg).unwrap())
     });
+    // The same frame coarse to fine: EM on the stride-2 grid until it converges, then
+    // at most 2 EM iterations on every pixel (`full_resolution_iterations`).
+    let coarse_to_fine = FitConfig {
+        stride: 2,
+        full_resolution_iterations: 2,
+        ..FitConfig::default()
+    };
+    let joint_error = |p: &Pose| {
+        let (a, b) = (model.joints(p), model.joints(&truth));
+        a.iter().zip(&b).map(|(x, y)| (x - y).norm()).sum::<f64>() / a.len() as f64
+    };
+    let ctf = fit_pose(&depth, &cam, &init, &model, None, None, &coarse_to_fine).unwrap();
+    eprintln!(
+        "mean joint error: whole EM {:.2} mm, coarse to fine {:.2} mm ({} iterations)",
+        1e3 * joint_error(&r.pose),
+        1e3 * joint_error(&ctf.pose),
+        ctf.iterations
+    );
+    g.bench_function("em_frame_320x240_coarse_to_fine", |b| {
+        b.iter(|| {
+            fit_pose(
+                &depth,
+                &cam,
+                black_box(&init),
+                &model,
+                None,
+                None,
+                &coarse_to_fine,
+            )
+            .unwrap()
+        })
+    });
     // A tracked frame: fit_pose with 4 EM iterations, on every pixel and on every
     // second pixel of every second row (plus the full-resolution labelling).
     for stride in [1, 2] {

@@ -308,6 +308,8 @@ class FitConfig:
     connectivity: int
     stride: int
     label_all_pixels: bool
+    full_resolution_iterations: int
+    recentred_start: bool
     def __init__(
         self,
         *,
@@ -332,6 +334,8 @@ class FitConfig:
         connectivity: int = 4,
         stride: int = 1,
         label_all_pixels: bool = True,
+        full_resolution_iterations: int = 0,
+        recentred_start: bool = True,
     ) -> None: ...
 
 class FitResult:

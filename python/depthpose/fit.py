@@ -63,6 +63,13 @@ def fit_pose(
     outlier), `energy`, `energy_trace`, `iterations`, `converged`, `reason`,
     `part_counts` and `outliers`.
 
+    A fresh fit also runs from `init_pose` moved so that its visible surface's centroid
+    lies on the observed points' (when that moves it by 1 cm or more), in parallel, and
+    returns the lower-energy result; this rescues starts that are a few centimetres off
+    (`FitConfig(recentred_start=False)` turns it off). With a `stride`,
+    `FitConfig(full_resolution_iterations=N)` continues the strided EM on every pixel
+    for up to N iterations (coarse to fine).
+
     `resume`: an earlier `FitResult` on this image (e.g. a brief fit with a small
     `max_iterations`) whose EM should go on: it continues from `init_pose` (normally
     `resume.pose`) with `resume`'s labels and iteration count, so the outlier distance

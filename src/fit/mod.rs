@@ -11,6 +11,7 @@ pub mod ik;
 pub mod lm;
 pub mod objective;
 pub mod shape;
+pub mod start;
 
 use crate::body::{pose_from_slice, BodyModel, Pose, NUM_JOINTS, NUM_SEGMENTS};
 use crate::camera::Camera;
@@ -47,10 +48,23 @@ pub struct FitConfig {
     /// with the sub-sampled energy (false: no full-resolution E-step, for brief fits
     /// whose pose is all that counts, or that are continued at the same stride).
     pub label_all_pixels: bool,
+    /// With a stride and `label_all_pixels`: after the strided EM and its
+    /// full-resolution labelling, at most this many more EM iterations on every pixel,
+    /// continued from that pose and labelling (coarse to fine; 0 = none). They stop
+    /// early when the full-resolution EM converges; the result's `energy_trace` is
+    /// theirs (full-resolution energies), `iterations` counts both stages.
+    pub full_resolution_iterations: usize,
+    /// A fresh fit (not a continued one) also starts from the given pose translated so
+    /// that its visible surface's centroid lies on the observed points' (see
+    /// [`start`]), when that moves it by at least 1 cm, and keeps the lower-energy EM.
+    pub recentred_start: bool,
 }
 
 /// Largest accepted [`FitConfig::stride`].
 pub const MAX_STRIDE: usize = 8;
+
+/// Largest accepted [`FitConfig::full_resolution_iterations`].
+pub const MAX_FULL_RESOLUTION_ITERATIONS: usize = 1000;
 
 impl Default for FitConfig {
     fn default() -> Self {
@@ -59,6 +73,8 @@ impl Default for FitConfig {
             connectivity: Connectivity::Four,
             stride: 1,
             label_all_pixels: true,
+            full_resolution_iterations: 0,
+            recentred_start: true,
         }
     }
 }
@@ -71,6 +87,15 @@ impl FitConfig {
             return Err(Error::invalid(
                 "stride",
                 format!("must be 1..={MAX_STRIDE}, got {}", self.stride),
+            ));
+        }
+        if self.full_resolution_iterations > MAX_FULL_RESOLUTION_ITERATIONS {
+            return Err(Error::invalid(
+                "full_resolution_iterations",
+                format!(
+                    "must be 0..={MAX_FULL_RESOLUTION_ITERATIONS}, got {}",
+                    self.full_resolution_iterations
+                ),
             ));
         }
         Ok(())
@@ -289,7 +314,8 @@ impl FitProblem {
     /// [`Self::fit`], or with `resume` (an earlier fit of this image, e.g. a brief
     /// one) the continuation of its EM from `init` (normally `resume`'s pose) with its
     /// labels and iteration count (see [`em::hard_em_from`]): `max_iterations` then
-    /// counts its iterations too.
+    /// counts its iterations too. A fresh fit with [`FitConfig::recentred_start`] runs
+    /// a second EM from the recentred start and returns the lower-energy one.
     pub fn fit_from(
         &self,
         model: &BodyModel,
@@ -297,7 +323,7 @@ impl FitProblem {
         resume: Option<&FitResult>,
         prior: Option<&PosePrior>,
     ) -> Result<FitResult> {
-        let (cloud, graph, config) = (&self.cloud, &self.graph, &self.config);
+        let config = &self.config;
         let resume_labels = resume.map(|r| self.resume_labels(r)).transpose()?;
         let resume = resume_labels
             .as_deref()
@@ -306,24 +332,72 @@ impl FitProblem {
                 labels,
                 iterations: r.iterations,
             });
+        // A fresh fit also starts from `init` moved onto the observed body (see
+        // [`start`]) and keeps the lower-energy EM; both run in parallel.
+        let second_start = (resume.is_none() && config.recentred_start)
+            .then(|| {
+                let target = start::centroid(&self.cloud.points)?;
+                start::recentred(model, &BodyModel::clamp_pose(init), &self.camera, &target)
+            })
+            .flatten();
+        let em = match second_start {
+            None => self.em(model, init, resume, prior)?,
+            Some(moved) => {
+                let (a, b) = rayon::join(
+                    || self.em(model, init, None, prior),
+                    || self.em(model, &moved, None, prior),
+                );
+                let (a, b) = (a?, b?);
+                if b.energy < a.energy {
+                    b
+                } else {
+                    a
+                }
+            }
+        };
+        let Some((sub_cloud, sub_cam, _, _)) = &self.sub else {
+            let labels = label_image(&self.cloud, &em.labels);
+            return Ok(FitResult::from_em(model, em, labels));
+        };
+        if !config.label_all_pixels {
+            // The EM's labels where its points are: sub-sampled pixel (r, c) is pixel
+            // (s·r, s·c), the one `resume_labels` reads back.
+            let (w, sw, s) = (self.camera.width, sub_cam.width, config.stride);
+            let mut labels = vec![-1i16; w * self.camera.height];
+            for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
+                labels[full_resolution_pixel(px as usize, sw, s, w)] = l as i16;
+            }
+            return Ok(FitResult::from_em(model, em, labels));
+        }
+        self.label_every_pixel(model, (sub_cloud, sub_cam), em, prior)
+    }
+
+    /// The EM from `init` on the points the fit runs on: every foreground point, or with
+    /// a stride the sub-sampled ones.
+    fn em(
+        &self,
+        model: &BodyModel,
+        init: &Pose,
+        resume: Option<EmResume<'_>>,
+        prior: Option<&PosePrior>,
+    ) -> Result<EmResult> {
+        let config = &self.config;
         let Some((sub_cloud, sub_cam, sub_graph, sub_depth)) = &self.sub else {
             let free_space = self.free_space_depth().map(|depth| FreeSpaceImage {
                 depth,
                 camera: &self.camera,
                 weight_scale: 1.0,
             });
-            let em = hard_em_from(
+            return hard_em_from(
                 model,
-                &cloud.points,
-                graph,
+                &self.cloud.points,
+                &self.graph,
                 init,
                 resume,
                 prior,
                 free_space,
                 &config.em,
-            )?;
-            let labels = label_image(cloud, &em.labels);
-            return Ok(FitResult::from_em(model, em, labels));
+            );
         };
         // EM on the sub-sampled cloud. The data term sums over s² times fewer points, so
         // the prior weight shrinks by s² to keep the balance of the full-resolution fit.
@@ -338,7 +412,7 @@ impl FitProblem {
             camera: sub_cam,
             weight_scale: 1.0 / (s * s) as f64,
         });
-        let em = hard_em_from(
+        hard_em_from(
             model,
             &sub_cloud.points,
             sub_graph,
@@ -347,18 +421,7 @@ impl FitProblem {
             scaled_prior.as_ref(),
             free_space,
             &config.em,
-        )?;
-        if !config.label_all_pixels {
-            // The EM's labels where its points are: sub-sampled pixel (r, c) is pixel
-            // (s·r, s·c), the one `resume_labels` reads back.
-            let (w, sw) = (self.camera.width, sub_cam.width);
-            let mut labels = vec![-1i16; w * self.camera.height];
-            for (&px, &l) in sub_cloud.pixels.iter().zip(&em.labels) {
-                labels[full_resolution_pixel(px as usize, sw, s, w)] = l as i16;
-            }
-            return Ok(FitResult::from_em(model, em, labels));
-        }
-        self.label_every_pixel(model, (sub_cloud, sub_cam), em, prior)
+        )
     }
 
     /// `result`, a fit of this image at this problem's stride that kept the EM's
@@ -446,6 +509,48 @@ impl FitProblem {
             tau,
             &final_em,
         )?;
+        if config.full_resolution_iterations > 0 {
+            // Coarse to fine: the EM goes on at full resolution from the strided pose and
+            // this labelling (τ continues its annealing at the strided EM's count).
+            let labels: Vec<i32> = final_labels
+                .labels
+                .iter()
+                .map(|&l| if l < 0 { OUTLIER } else { l })
+                .collect();
+            let fine_config = EmConfig {
+                max_iterations: em.iterations + config.full_resolution_iterations,
+                ..config.em
+            };
+            let free_space = self.free_space_depth().map(|depth| FreeSpaceImage {
+                depth,
+                camera: &self.camera,
+                weight_scale: 1.0,
+            });
+            let fine = hard_em_from(
+                model,
+                &cloud.points,
+                graph,
+                &em.pose,
+                Some(EmResume {
+                    labels: &labels,
+                    iterations: em.iterations,
+                }),
+                prior,
+                free_space,
+                &fine_config,
+            )?;
+            // The fine stage is a bounded refinement: spending its budget says nothing
+            // about the EM's convergence, which the strided stage reports.
+            let termination = match fine.termination {
+                EmTermination::MaxIterations => em.termination,
+                t => t,
+            };
+            let labels = label_image(cloud, &fine.labels);
+            return Ok(FitResult {
+                termination,
+                ..FitResult::from_em(model, fine, labels)
+            });
+        }
         // The full-resolution labelling's energy and counts replace the EM's.
         let free_space = self.free_space_depth().map(|depth| {
             let cost = config.em.free_space_cost(1.0);

@@ -40,6 +40,8 @@ pub struct PyFitConfig {
     connectivity: u32,
     stride: usize,
     label_all_pixels: bool,
+    full_resolution_iterations: usize,
+    recentred_start: bool,
 }
 
 impl PyFitConfig {
@@ -95,6 +97,8 @@ impl PyFitConfig {
             connectivity: Connectivity::from_int(self.connectivity)?,
             stride: self.stride,
             label_all_pixels: self.label_all_pixels,
+            full_resolution_iterations: self.full_resolution_iterations,
+            recentred_start: self.recentred_start,
         };
         cfg.validate()?;
         Ok(cfg)
@@ -114,7 +118,7 @@ impl PyFitConfig {
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
         expansion_cycles=None, free_space_weight=None, free_space_margin=None,
         free_space_truncation=None, lm_max_iterations=None, connectivity=4, stride=1,
-        label_all_pixels=true))]
+        label_all_pixels=true, full_resolution_iterations=0, recentred_start=true))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma: Option<f64>,
@@ -138,6 +142,8 @@ impl PyFitConfig {
         connectivity: i64,
         stride: i64,
         label_all_pixels: bool,
+        full_resolution_iterations: i64,
+        recentred_start: bool,
     ) -> PyResult<Self> {
         let d = EmConfig::default();
         let count = |v: Option<i64>, default: usize, name: &str| -> PyResult<usize> {
@@ -169,6 +175,12 @@ impl PyFitConfig {
             connectivity: u32::try_from(connectivity).unwrap_or(0),
             stride: usize::try_from(stride).unwrap_or(0),
             label_all_pixels,
+            full_resolution_iterations: count(
+                Some(full_resolution_iterations),
+                0,
+                "full_resolution_iterations",
+            )?,
+            recentred_start,
         };
         cfg.to_rust()?;
         Ok(cfg)
@@ -176,9 +188,11 @@ impl PyFitConfig {
 
     fn __repr__(&self) -> String {
         format!(
-            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={}, label_all_pixels={})",
+            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={}, label_all_pixels={}, full_resolution_iterations={}, recentred_start={})",
             self.sigma, self.loss, self.potts, self.contrast_weight, self.outlier_distance,
-            self.max_iterations, self.stride, if self.label_all_pixels { "True" } else { "False" }
+            self.max_iterations, self.stride, if self.label_all_pixels { "True" } else { "False" },
+            self.full_resolution_iterations,
+            if self.recentred_start { "True" } else { "False" }
         )
     }
 }
