@@ -310,6 +310,7 @@ class FitConfig:
     label_all_pixels: bool
     full_resolution_iterations: int
     recentred_start: bool
+    swapped_limb_starts: bool
     def __init__(
         self,
         *,
@@ -336,6 +337,7 @@ class FitConfig:
         label_all_pixels: bool = True,
         full_resolution_iterations: int = 0,
         recentred_start: bool = True,
+        swapped_limb_starts: bool = False,
     ) -> None: ...
 
 class FitResult:

@@ -66,7 +66,9 @@ def fit_pose(
     A fresh fit also runs from `init_pose` moved so that its visible surface's centroid
     lies on the observed points' (when that moves it by 1 cm or more), in parallel, and
     returns the lower-energy result; this rescues starts that are a few centimetres off
-    (`FitConfig(recentred_start=False)` turns it off). With a `stride`,
+    (`FitConfig(recentred_start=False)` turns it off); `swapped_limb_starts=True` also
+    starts from the pose with its left and right legs (and arms) exchanged, at up to 3x
+    the work. With a `stride`,
     `FitConfig(full_resolution_iterations=N)` continues the strided EM on every pixel
     for up to N iterations (coarse to fine).
 

@@ -58,6 +58,11 @@ pub struct FitConfig {
     /// that its visible surface's centroid lies on the observed points' (see
     /// [`start`]), when that moves it by at least 1 cm, and keeps the lower-energy EM.
     pub recentred_start: bool,
+    /// A fresh fit also starts from the given pose with the left and right legs'
+    /// angles exchanged, and with the arms' exchanged (each also recentred when
+    /// `recentred_start` is on), and keeps the lowest-energy EM: up to 3× the work, for
+    /// starts that may have a limb on the wrong side (off by default).
+    pub swapped_limb_starts: bool,
 }
 
 /// Largest accepted [`FitConfig::stride`].
@@ -75,6 +80,7 @@ impl Default for FitConfig {
             label_all_pixels: true,
             full_resolution_iterations: 0,
             recentred_start: true,
+            swapped_limb_starts: false,
         }
     }
 }
@@ -314,8 +320,9 @@ impl FitProblem {
     /// [`Self::fit`], or with `resume` (an earlier fit of this image, e.g. a brief
     /// one) the continuation of its EM from `init` (normally `resume`'s pose) with its
     /// labels and iteration count (see [`em::hard_em_from`]): `max_iterations` then
-    /// counts its iterations too. A fresh fit with [`FitConfig::recentred_start`] runs
-    /// a second EM from the recentred start and returns the lower-energy one.
+    /// counts its iterations too. A fresh fit with [`FitConfig::recentred_start`] (or
+    /// [`FitConfig::swapped_limb_starts`]) runs EMs from those starts too and returns
+    /// the lowest-energy one.
     pub fn fit_from(
         &self,
         model: &BodyModel,
@@ -332,28 +339,35 @@ impl FitProblem {
                 labels,
                 iterations: r.iterations,
             });
-        // A fresh fit also starts from `init` moved onto the observed body (see
-        // [`start`]) and keeps the lower-energy EM; both run in parallel.
-        let second_start = (resume.is_none() && config.recentred_start)
-            .then(|| {
-                let target = start::centroid(&self.cloud.points)?;
-                start::recentred(model, &BodyModel::clamp_pose(init), &self.camera, &target)
-            })
-            .flatten();
-        let em = match second_start {
-            None => self.em(model, init, resume, prior)?,
-            Some(moved) => {
-                let (a, b) = rayon::join(
-                    || self.em(model, init, None, prior),
-                    || self.em(model, &moved, None, prior),
-                );
-                let (a, b) = (a?, b?);
-                if b.energy < a.energy {
-                    b
-                } else {
-                    a
+        // A fresh fit also starts from `init` moved onto the observed body, and with its
+        // limbs swapped if asked (see [`start`]); the EMs run in parallel and the first
+        // of the lowest energy is kept (so the given start wins ties).
+        let mut starts = vec![BodyModel::clamp_pose(init)];
+        if resume.is_none() {
+            if config.swapped_limb_starts {
+                starts.push(start::limbs_swapped(&starts[0], true, false));
+                starts.push(start::limbs_swapped(&starts[0], false, true));
+            }
+            if config.recentred_start {
+                if let Some(target) = start::centroid(&self.cloud.points) {
+                    let moved: Vec<Pose> = starts
+                        .iter()
+                        .filter_map(|s| start::recentred(model, s, &self.camera, &target))
+                        .collect();
+                    starts.extend(moved);
                 }
             }
+        }
+        let em = if starts.len() == 1 {
+            self.em(model, init, resume, prior)?
+        } else {
+            let ems = starts
+                .par_iter()
+                .map(|s| self.em(model, s, None, prior))
+                .collect::<Result<Vec<_>>>()?;
+            ems.into_iter()
+                .reduce(|best, e| if e.energy < best.energy { e } else { best })
+                .expect("at least two starts")
         };
         let Some((sub_cloud, sub_cam, _, _)) = &self.sub else {
             let labels = label_image(&self.cloud, &em.labels);

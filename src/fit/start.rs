@@ -1,4 +1,5 @@
-//! A second start for a fit: the given start pose moved onto the observed body.
+//! More starts for a fit: the given start pose moved onto the observed body, and
+//! (optionally) with its left and right limbs exchanged.
 //!
 //! EM converges only from near the truth, and the translation is what a rough start
 //! gets wrong most harmfully: a body 5–10 cm off in depth or sideways is labelled
@@ -12,6 +13,23 @@
 use crate::body::{param, BodyModel, Pose};
 use crate::camera::Camera;
 use nalgebra::Vector3;
+
+/// `pose` with the angles of the left and right legs exchanged (`legs`) and/or those of
+/// the arms (`arms`). The joint limits are symmetric, so the result is within them.
+pub fn limbs_swapped(pose: &Pose, legs: bool, arms: bool) -> Pose {
+    let mut out = *pose;
+    let mut swap = |right: usize, left: usize, n: usize| {
+        out[right..right + n].copy_from_slice(&pose[left..left + n]);
+        out[left..left + n].copy_from_slice(&pose[right..right + n]);
+    };
+    if legs {
+        swap(param::R_HIP, param::L_HIP, 3);
+    }
+    if arms {
+        swap(param::R_SHOULDER, param::L_SHOULDER, 4);
+    }
+    out
+}
 
 /// Below this shift (m) the moved start is not worth a second fit.
 pub const MIN_SHIFT: f64 = 0.01;
@@ -78,6 +96,33 @@ pub fn recentred(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn limbs_swapped_exchanges_sides_and_undoes_itself() {
+        let mut p = BodyModel::neutral_pose();
+        for (k, v) in p.iter_mut().enumerate() {
+            *v += 0.01 * k as f64;
+        }
+        let q = limbs_swapped(&p, true, true);
+        assert_eq!(
+            q[param::R_HIP..param::R_HIP + 3],
+            p[param::L_HIP..param::L_HIP + 3]
+        );
+        assert_eq!(
+            q[param::L_HIP..param::L_HIP + 3],
+            p[param::R_HIP..param::R_HIP + 3]
+        );
+        assert_eq!(
+            q[param::R_SHOULDER..param::R_ELBOW + 1],
+            p[param::L_SHOULDER..param::L_ELBOW + 1]
+        );
+        assert_eq!(q[..param::R_SHOULDER], p[..param::R_SHOULDER]);
+        assert_eq!(limbs_swapped(&q, true, true), p);
+        assert_eq!(limbs_swapped(&p, false, false), p);
+        let legs = limbs_swapped(&p, true, false);
+        assert_eq!(legs[..param::R_HIP], p[..param::R_HIP]);
+        assert_eq!(BodyModel::clamp_pose(&q), q);
+    }
 
     /// The model rendered at a known pose, started 8 cm off: the moved start lands
     /// within a few millimetres of the true translation; a start already in place gets

@@ -42,6 +42,7 @@ pub struct PyFitConfig {
     label_all_pixels: bool,
     full_resolution_iterations: usize,
     recentred_start: bool,
+    swapped_limb_starts: bool,
 }
 
 impl PyFitConfig {
@@ -99,6 +100,7 @@ impl PyFitConfig {
             label_all_pixels: self.label_all_pixels,
             full_resolution_iterations: self.full_resolution_iterations,
             recentred_start: self.recentred_start,
+            swapped_limb_starts: self.swapped_limb_starts,
         };
         cfg.validate()?;
         Ok(cfg)
@@ -118,7 +120,8 @@ impl PyFitConfig {
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
         expansion_cycles=None, free_space_weight=None, free_space_margin=None,
         free_space_truncation=None, lm_max_iterations=None, connectivity=4, stride=1,
-        label_all_pixels=true, full_resolution_iterations=0, recentred_start=true))]
+        label_all_pixels=true, full_resolution_iterations=0, recentred_start=true,
+        swapped_limb_starts=false))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         sigma: Option<f64>,
@@ -144,6 +147,7 @@ impl PyFitConfig {
         label_all_pixels: bool,
         full_resolution_iterations: i64,
         recentred_start: bool,
+        swapped_limb_starts: bool,
     ) -> PyResult<Self> {
         let d = EmConfig::default();
         let count = |v: Option<i64>, default: usize, name: &str| -> PyResult<usize> {
@@ -181,6 +185,7 @@ impl PyFitConfig {
                 "full_resolution_iterations",
             )?,
             recentred_start,
+            swapped_limb_starts,
         };
         cfg.to_rust()?;
         Ok(cfg)
@@ -188,11 +193,12 @@ impl PyFitConfig {
 
     fn __repr__(&self) -> String {
         format!(
-            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={}, label_all_pixels={}, full_resolution_iterations={}, recentred_start={})",
+            "FitConfig(sigma={}, loss={:?}, potts={}, contrast_weight={}, outlier_distance={}, max_iterations={}, stride={}, label_all_pixels={}, full_resolution_iterations={}, recentred_start={}, swapped_limb_starts={})",
             self.sigma, self.loss, self.potts, self.contrast_weight, self.outlier_distance,
             self.max_iterations, self.stride, if self.label_all_pixels { "True" } else { "False" },
             self.full_resolution_iterations,
-            if self.recentred_start { "True" } else { "False" }
+            if self.recentred_start { "True" } else { "False" },
+            if self.swapped_limb_starts { "True" } else { "False" }
         )
     }
 }
