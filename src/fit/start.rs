@@ -97,6 +97,49 @@ pub fn recentred(
 mod tests {
     use super::*;
 
+    /// Random poses in view (joint angles ±0.6 rad around neutral, the root turned up
+    /// to ±0.3 rad, 2.2–4 m away), started up to 0.1 m off on each axis: the moved start
+    /// lands within 2 cm of the true translation, within 5 mm in the median. (The visible
+    /// surface changes a little as the body moves, so the centroids are not rigid.)
+    #[test]
+    fn recentring_recovers_random_translated_poses() {
+        let model = BodyModel::default();
+        let cam = Camera::itop();
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        let mut uniform = |lo: f64, hi: f64| {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            lo + (hi - lo) * ((state >> 11) as f64 / (1u64 << 53) as f64)
+        };
+        let mut errors = Vec::new();
+        for _ in 0..60 {
+            let mut truth = BodyModel::neutral_pose();
+            for v in truth[6..].iter_mut() {
+                *v += uniform(-0.6, 0.6);
+            }
+            for k in 0..3 {
+                truth[param::ROOT_R + k] = uniform(-0.3, 0.3);
+            }
+            truth[param::ROOT_T] = uniform(-0.4, 0.4);
+            truth[param::ROOT_T + 1] = uniform(-0.2, 0.2);
+            truth[param::ROOT_T + 2] = uniform(2.2, 4.0);
+            let truth = BodyModel::clamp_pose(&truth);
+            let (depth, _) = model.render_depth(&truth, &cam);
+            let target = depth_centroid(&depth, &cam).unwrap();
+            let mut init = truth;
+            for k in 0..3 {
+                init[param::ROOT_T + k] += uniform(-0.1, 0.1);
+            }
+            let moved = recentred(&model, &init, &cam, &target).unwrap_or(init);
+            let err = Vector3::from_fn(|k, _| moved[param::ROOT_T + k] - truth[param::ROOT_T + k]);
+            errors.push(err.norm());
+        }
+        errors.sort_by(f64::total_cmp);
+        assert!(errors[errors.len() - 1] < 0.02, "{errors:?}");
+        assert!(errors[errors.len() / 2] < 0.005, "{errors:?}");
+    }
+
     #[test]
     fn limbs_swapped_exchanges_sides_and_undoes_itself() {
         let mut p = BodyModel::neutral_pose();
