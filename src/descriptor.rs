@@ -483,12 +483,15 @@ impl Silhouette {
                 cloud = Cloud::from_depth(depth, camera, Some(&keep))?;
             }
         }
-        if cloud.len() < MIN_POINTS {
-            return Err(Error::NoBody(format!(
-                "only {} foreground pixels with depth; at least {MIN_POINTS} are needed",
-                cloud.len()
-            )));
-        }
+        let centroid = match cloud.centroid() {
+            Some(c) if cloud.len() >= MIN_POINTS => c,
+            _ => {
+                return Err(Error::NoBody(format!(
+                    "only {} foreground pixels with depth; at least {MIN_POINTS} are needed",
+                    cloud.len()
+                )))
+            }
+        };
         let mut normals = normals_from_depth(
             depth,
             camera,
@@ -498,11 +501,6 @@ impl Silhouette {
                 ..Default::default()
             },
         );
-        let mut c = Vector3::zeros();
-        for p in &cloud.points {
-            c += Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-        }
-        let centroid = c / cloud.len() as f64;
         let alignment = line_of_sight_alignment(&centroid.normalize());
         let r = alignment.matrix().cast::<f32>();
         for n in normals.iter_mut() {

@@ -102,6 +102,18 @@ impl Cloud {
         Ok(cloud)
     }
 
+    /// Mean of the points (camera frame, metres), or None for an empty cloud.
+    pub fn centroid(&self) -> Option<nalgebra::Vector3<f64>> {
+        if self.points.is_empty() {
+            return None;
+        }
+        let mut sum = nalgebra::Vector3::zeros();
+        for p in &self.points {
+            sum += nalgebra::Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+        }
+        Some(sum / self.points.len() as f64)
+    }
+
     /// [`Cloud::from_depth`] into this cloud, reusing its storage: a tracker that keeps
     /// one `Cloud` allocates nothing per frame once the buffers have grown.
     pub fn fill_from_depth(

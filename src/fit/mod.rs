@@ -264,9 +264,13 @@ impl FitProblem {
         })
     }
 
-    /// The whole image for the free-space term (None when it is off).
-    fn free_space_depth(&self) -> Option<&[f32]> {
-        (!self.depth.is_empty()).then_some(&self.depth[..])
+    /// The whole full-resolution image for the free-space term (None when it is off).
+    fn free_space_image(&self) -> Option<FreeSpaceImage<'_>> {
+        (!self.depth.is_empty()).then_some(FreeSpaceImage {
+            depth: &self.depth,
+            camera: &self.camera,
+            weight_scale: 1.0,
+        })
     }
 
     /// Fits `model` from `init` with an optional prior toward a pose.
@@ -349,7 +353,7 @@ impl FitProblem {
                 starts.push(start::limbs_swapped(&starts[0], false, true));
             }
             if config.recentred_start {
-                if let Some(target) = start::centroid(&self.cloud.points) {
+                if let Some(target) = self.cloud.centroid() {
                     let moved: Vec<Pose> = starts
                         .iter()
                         .filter_map(|s| start::recentred(model, s, &self.camera, &target))
@@ -397,11 +401,7 @@ impl FitProblem {
     ) -> Result<EmResult> {
         let config = &self.config;
         let Some((sub_cloud, sub_cam, sub_graph, sub_depth)) = &self.sub else {
-            let free_space = self.free_space_depth().map(|depth| FreeSpaceImage {
-                depth,
-                camera: &self.camera,
-                weight_scale: 1.0,
-            });
+            let free_space = self.free_space_image();
             return hard_em_from(
                 model,
                 &self.cloud.points,
@@ -535,11 +535,7 @@ impl FitProblem {
                 max_iterations: em.iterations + config.full_resolution_iterations,
                 ..config.em
             };
-            let free_space = self.free_space_depth().map(|depth| FreeSpaceImage {
-                depth,
-                camera: &self.camera,
-                weight_scale: 1.0,
-            });
+            let free_space = self.free_space_image();
             let fine = hard_em_from(
                 model,
                 &cloud.points,
@@ -566,9 +562,9 @@ impl FitProblem {
             });
         }
         // The full-resolution labelling's energy and counts replace the EM's.
-        let free_space = self.free_space_depth().map(|depth| {
+        let free_space = self.free_space_image().map(|f| {
             let cost = config.em.free_space_cost(1.0);
-            FreeSpaceTerm::new(model, depth, &self.camera, cost).cost(&em.pose)
+            FreeSpaceTerm::new(model, f.depth, f.camera, cost).cost(&em.pose)
         });
         let energy = crf + prior.map_or(0.0, |p| p.cost(&em.pose)) + free_space.unwrap_or(0.0);
         let labels = label_image(cloud, &final_labels.labels);

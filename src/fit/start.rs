@@ -12,6 +12,7 @@
 
 use crate::body::{param, BodyModel, Pose};
 use crate::camera::Camera;
+use crate::cloud::{Cloud, DepthView};
 use nalgebra::Vector3;
 
 /// `pose` with the angles of the left and right legs exchanged (`legs`) and/or those of
@@ -41,33 +42,16 @@ const RENDER_SCALE: f64 = 0.5;
 /// little less or more than the body, a second round takes up most of the remainder.
 const ROUNDS: usize = 2;
 
-/// Mean of camera-frame points.
-pub fn centroid(points: &[[f32; 3]]) -> Option<Vector3<f64>> {
-    if points.is_empty() {
-        return None;
-    }
-    let sum = points.iter().fold(Vector3::zeros(), |s, p| {
-        s + Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64)
-    });
-    Some(sum / points.len() as f64)
-}
-
-/// Centroid of the camera-frame points of a depth image's readings (z > 0), each pixel
-/// weighted equally as in a point cloud.
+/// Centroid of the points of a depth image's readings (z > 0), back-projected as the
+/// fit's own cloud is, so rendered and observed centroids are alike.
 fn depth_centroid(depth: &[f32], camera: &Camera) -> Option<Vector3<f64>> {
-    let (mut sum, mut n) = (Vector3::zeros(), 0usize);
-    for (px, &z) in depth.iter().enumerate() {
-        if z > 0.0 {
-            let (r, c) = (px / camera.width, px % camera.width);
-            sum += camera.back_project(c as f64, r as f64, z as f64);
-            n += 1;
-        }
-    }
-    (n > 0).then(|| sum / n as f64)
+    let view = DepthView::new(depth, camera.height, camera.width, "depth").ok()?;
+    Cloud::from_depth(&view, camera, None).ok()?.centroid()
 }
 
 /// `init` translated so that the centroid of its visible surface (rendered through
-/// `camera` at half resolution) lies at `target`, the centroid of the observed points.
+/// `camera` at half resolution) lies at `target`, the centroid of the observed points
+/// ([`Cloud::centroid`]).
 /// None when the model is out of view, or the move is under [`MIN_SHIFT`].
 pub fn recentred(
     model: &BodyModel,
