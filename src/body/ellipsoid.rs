@@ -1247,11 +1247,15 @@ mod tests {
             let n = Vector3::new(n[0], n[1], n[2]);
             prop_assert!((n - q.normal).norm() < 1e-9);
             let lower = fast.distance_lower_bound(&fast.local(&pa));
-            prop_assert!(lower >= 0.0 && lower <= d.abs() + 1e-12, "{lower} > {d}");
-            // The square-root-free test agrees with the bound, away from rounding ties.
+            // Relative slack: on a near-sphere the sphere bound *is* the distance, and
+            // the two round differently (CI once saw 3.9238421640003 > 3.9238421639976).
+            prop_assert!(lower >= 0.0 && lower <= d.abs() * (1.0 + 1e-11) + 1e-12, "{lower} > {d}");
+            // The square-root-free test agrees with the bound, away from rounding ties
+            // (whose width scales with the coordinates, not with t).
             let yl = fast.local(&pa);
+            let tie = 1e-12 * (1.0 + y.norm());
             for t in [-0.1, 0.0, 0.5 * lower, lower * (1.0 - 1e-9), lower * (1.0 + 1e-9), 2.0 * lower + 0.01] {
-                if t <= 0.0 || (lower - t).abs() > 1e-12 * t {
+                if t <= 0.0 || (lower - t).abs() > tie * (1.0 + t) {
                     prop_assert_eq!(fast.is_beyond(&fast.beyond(t), &yl), lower >= t, "t {}", t);
                 }
             }
