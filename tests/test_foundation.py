@@ -191,6 +191,45 @@ def test_bad_files(tmp_path):
         dp.read_depth(tmp_path / "ok.png", scale=-1)
 
 
+def test_npz_readers_refuse_empty_truncated_and_missing_files(tmp_path):
+    from depthpose import synth
+
+    np.savez_compressed(tmp_path / "ok.npz", depth=np.zeros((2, 3, 4), np.float32))
+    data = (tmp_path / "ok.npz").read_bytes()
+    (tmp_path / "trunc.npz").write_bytes(data[: len(data) // 2])
+    (tmp_path / "empty.npz").write_bytes(b"")
+    for name in ["trunc.npz", "empty.npz", "missing.npz"]:
+        with pytest.raises(dp.FileFormatError, match=name):
+            synth.load(tmp_path / name)
+        with pytest.raises(dp.FileFormatError, match=name):
+            dp.TemplateDatabase.load(tmp_path / name)
+
+
+# A negative integer argument is bad input that names the argument, not an
+# OverflowError from the integer conversion.
+_IMG = np.random.default_rng(0).integers(0, 255, (40, 50), np.uint8)
+_NEGATIVE_INT_CALLS = {
+    "window": lambda: dp.stereo.match(_IMG, _IMG, window=-5),
+    "max_disparity": lambda: dp.stereo.match(_IMG, _IMG, max_disparity=-1),
+    "num_seeds": lambda: dp.stereo.match(_IMG, _IMG, num_seeds=-1),
+    "min_segment": lambda: dp.stereo.match(_IMG, _IMG, min_segment=-1),
+    "seed": lambda: dp.stereo.match(_IMG, _IMG, seed=-1),
+    "radius": lambda: dp.surface_normals(GOOD, dp.Camera(100, 100, 16, 12, 32, 24), radius=-1),
+    "connectivity": lambda: dp.pixel_graph(GOOD, dp.Camera(100, 100, 16, 12, 32, 24), connectivity=-4),
+    "min_component": lambda: dp.foreground_mask(GOOD, min_component=-1),
+    "rings": lambda: dp.BodyModel().superquadric_meshes(dp.BodyModel.neutral_pose(), rings=-3),
+    "samples": lambda: dp.surface_context(GOOD, dp.Camera(100, 100, 16, 12, 32, 24), samples=-1),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_NEGATIVE_INT_CALLS))
+def test_negative_integer_arguments_are_named(name):
+    with pytest.raises(dp.DepthPoseError, match=name):
+        _NEGATIVE_INT_CALLS[name]()
+    with pytest.raises(dp.DepthPoseError, match="seed"):
+        dp.stereo.match(_IMG, _IMG, seed=2**64)
+
+
 # ---- foreground on the shared data ----------------------------------------------------------
 def test_foreground_iou_on_shared_synthetic_sequences():
     folder = shared("synth")

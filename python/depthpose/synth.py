@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import json
 import math
+import zipfile
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from depthpose._core import BodyModel, Camera, InvalidInputError
+from depthpose._core import BodyModel, Camera, FileFormatError, InvalidInputError
 
 __all__ = ["MOTIONS", "make_sequence", "save", "load", "motion_pose"]
 
@@ -324,5 +325,10 @@ def save(path: str | Path, seq: dict[str, np.ndarray]) -> None:
 
 def load(path: str | Path) -> dict[str, np.ndarray]:
     """Reads a sequence written by `save` (or a shared synthetic sequence)."""
-    with np.load(path, allow_pickle=False) as d:
-        return {k: d[k] for k in d.files}
+    try:
+        with np.load(path, allow_pickle=False) as d:
+            return {k: d[k] for k in d.files}
+    except FileNotFoundError:
+        raise FileFormatError(f"{path}: no such file") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
+        raise FileFormatError(f"{path}: not a sequence file ({e})") from None

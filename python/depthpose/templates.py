@@ -11,6 +11,7 @@ import os
 import sys
 import threading
 import time
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -275,7 +276,7 @@ class TemplateDatabase:
                 arrays = {k: f[k] for k in f.files}
         except FileNotFoundError:
             raise FileFormatError(f"{path}: no such file") from None
-        except (OSError, ValueError) as e:
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
             raise FileFormatError(f"{path}: not a template database ({e})") from None
         for k in ("format_version", "hash"):
             if k not in arrays:

@@ -18,6 +18,25 @@ fn err(name: &str, msg: impl std::fmt::Display) -> PyErr {
     InvalidInputError::new_err(format!("{name}: {msg}"))
 }
 
+/// A non-negative integer argument (a count, a size, an index). Bindings take such
+/// arguments as `i128`, not `usize`, whose conversion raises `OverflowError` for a
+/// negative value; here a negative or huge value is bad input that names the argument.
+pub fn count(value: i128, name: &str) -> PyResult<usize> {
+    usize::try_from(value)
+        .map_err(|_| err(name, format!("must be a non-negative integer, got {value}")))
+}
+
+/// [`count`] for an optional argument.
+pub fn count_opt(value: Option<i128>, name: &str) -> PyResult<Option<usize>> {
+    value.map(|v| count(v, name)).transpose()
+}
+
+/// An RNG seed argument: an integer in 0..2**64 (see [`count`]).
+pub fn seed(value: i128, name: &str) -> PyResult<u64> {
+    u64::try_from(value)
+        .map_err(|_| err(name, format!("must be an integer in 0..2**64, got {value}")))
+}
+
 /// The array behind `obj`, with the checks every argument gets: a numpy array (not a
 /// list), `ndim` dimensions if given, non-empty. Images must also be C-contiguous: a
 /// strided view of a frame would be copied silently on every call of a live loop, so we

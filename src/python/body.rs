@@ -1,7 +1,7 @@
 //! `BodyModel` for Python: kinematics, distances, Jacobians, rendering, meshes.
 
 use super::arrays::{bool_array, depth_array};
-use super::arrays::{f32_array, f64_array, i64_array, to_numpy};
+use super::arrays::{count, f32_array, f64_array, i64_array, to_numpy};
 use super::camera::PyCamera;
 use super::fit::{PyFitConfig, PyShapeFitResult};
 use crate::body::superquadric::MeshConfig;
@@ -358,9 +358,10 @@ impl PyBodyModel {
         &self,
         py: Python<'py>,
         pose: &Bound<'py, PyAny>,
-        rings: usize,
-        sectors: usize,
+        rings: i128,
+        sectors: i128,
     ) -> PyResult<Vec<(F64Array<'py>, I64Array<'py>)>> {
+        let (rings, sectors) = (count(rings, "rings")?, count(sectors, "sectors")?);
         let p = pose_arg(pose, "pose")?;
         if !(3..=1000).contains(&rings) || !(3..=1000).contains(&sectors) {
             return Err(Error::invalid(

@@ -1,6 +1,6 @@
 //! Depth → points, normals, neighbour graph and foreground, for Python.
 
-use super::arrays::{bool_array, depth_array, to_numpy};
+use super::arrays::{bool_array, count, depth_array, to_numpy};
 use super::camera::PyCamera;
 use crate::cloud::{
     foreground_mask as fg_mask, neighbour_graph, normals_from_depth, Cloud, Connectivity,
@@ -58,8 +58,9 @@ fn surface_normals<'py>(
     depth: &Bound<'py, PyAny>,
     camera: &PyCamera,
     mask: Option<&Bound<'py, PyAny>>,
-    radius: usize,
+    radius: i128,
 ) -> PyResult<F32Array<'py>> {
+    let radius = count(radius, "radius")?;
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
     if radius == 0 || radius > 32 {
@@ -93,11 +94,21 @@ fn pixel_graph<'py>(
     depth: &Bound<'py, PyAny>,
     camera: &PyCamera,
     mask: Option<&Bound<'py, PyAny>>,
-    connectivity: u32,
+    connectivity: i128,
 ) -> PyResult<(I32Array<'py>, F32Array<'py>, F32Array<'py>)> {
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
-    let conn = Connectivity::from_int(connectivity)?;
+    let conn = match connectivity {
+        4 => Connectivity::Four,
+        8 => Connectivity::Eight,
+        _ => {
+            return Err(crate::Error::invalid(
+                "connectivity",
+                format!("must be 4 or 8, got {connectivity}"),
+            )
+            .into())
+        }
+    };
     let g = py.detach(|| -> PyResult<_> {
         let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
         Ok(neighbour_graph(&cloud, conn))
@@ -125,9 +136,10 @@ fn foreground_mask<'py>(
     bg_tolerance: f32,
     bg_tolerance_quadratic: f32,
     max_step: f32,
-    min_component: usize,
+    min_component: i128,
     large_share: f32,
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
+    let min_component = count(min_component, "min_component")?;
     let d = depth_array(depth, "depth")?;
     let bg = background
         .map(|b| depth_array(b, "background"))

@@ -1,6 +1,6 @@
 //! Stereo matching (Growing Correspondence Seeds) and disparity → depth, for Python.
 
-use super::arrays::{f32_array, f64_array, to_numpy, Arr};
+use super::arrays::{count, count_opt, f32_array, f64_array, seed as arg_seed, to_numpy, Arr};
 use crate::stereo::{
     depth_from_disparity as depth_of, gray_from_rgb, match_stereo_seeded, Seed, Similarity,
     StereoConfig,
@@ -93,20 +93,25 @@ fn stereo_match<'py>(
     py: Python<'py>,
     left: &Bound<'py, PyAny>,
     right: &Bound<'py, PyAny>,
-    max_disparity: Option<usize>,
-    window: usize,
+    max_disparity: Option<i128>,
+    window: i128,
     threshold: Option<f32>,
-    num_seeds: Option<usize>,
+    num_seeds: Option<i128>,
     seeds: Option<&Bound<'py, PyAny>>,
-    seed: u64,
+    seed: i128,
     lr_check: bool,
     subpixel: bool,
     fill_gaps: bool,
     seed_distinctness: Option<f32>,
     min_texture: Option<f32>,
-    min_segment: Option<usize>,
+    min_segment: Option<i128>,
     similarity: &str,
 ) -> PyResult<(F32Array<'py>, F32Array<'py>)> {
+    let max_disparity = count_opt(max_disparity, "max_disparity")?;
+    let window = count(window, "window")?;
+    let num_seeds = count_opt(num_seeds, "num_seeds")?;
+    let seed = arg_seed(seed, "seed")?;
+    let min_segment = count_opt(min_segment, "min_segment")?;
     let l = gray_image(left, "left")?;
     let r = gray_image(right, "right")?;
     if l.shape != r.shape {

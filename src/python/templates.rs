@@ -1,6 +1,8 @@
 //! Surface-context descriptors and the template database, for Python.
 
-use super::arrays::{bool_array, depth_array, f32_array, f64_array, i64_array, to_numpy};
+use super::arrays::{
+    bool_array, count, depth_array, f32_array, f64_array, i64_array, seed as arg_seed, to_numpy,
+};
 use super::camera::PyCamera;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{BodyModel, BodyShape, NUM_JOINTS, NUM_PARAMS, NUM_SHAPE_PARAMS};
@@ -27,16 +29,21 @@ fn model_of(shape: Option<&Bound<PyAny>>) -> PyResult<BodyModel> {
 
 #[allow(clippy::too_many_arguments)]
 fn config_of(
-    width: usize,
-    height: usize,
+    width: i128,
+    height: i128,
     distance: f64,
     field_height: f64,
     renderer: &str,
-    samples: usize,
-    radial_bins: usize,
-    angular_bins: usize,
-    seed: u64,
+    samples: i128,
+    radial_bins: i128,
+    angular_bins: i128,
+    seed: i128,
 ) -> PyResult<TemplateConfig> {
+    let (width, height) = (count(width, "width")?, count(height, "height")?);
+    let samples = count(samples, "samples")?;
+    let radial_bins = count(radial_bins, "radial_bins")?;
+    let angular_bins = count(angular_bins, "angular_bins")?;
+    let seed = arg_seed(seed, "seed")?;
     let renderer = match renderer {
         "superquadric" => TemplateRenderer::Superquadric,
         "ellipsoid" => TemplateRenderer::Ellipsoid,
@@ -84,10 +91,10 @@ fn surface_context<'py>(
     depth: &Bound<'py, PyAny>,
     camera: &PyCamera,
     mask: Option<&Bound<'py, PyAny>>,
-    samples: usize,
-    radial_bins: usize,
-    angular_bins: usize,
-    seed: u64,
+    samples: i128,
+    radial_bins: i128,
+    angular_bins: i128,
+    seed: i128,
 ) -> PyResult<(
     Bound<'py, PyArrayDyn<f32>>,
     Bound<'py, PyArrayDyn<f32>>,
@@ -96,10 +103,10 @@ fn surface_context<'py>(
     let d = depth_array(depth, "depth")?;
     let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
     let cfg = DescriptorConfig {
-        samples,
-        radial_bins,
-        angular_bins,
-        seed,
+        samples: count(samples, "samples")?,
+        radial_bins: count(radial_bins, "radial_bins")?,
+        angular_bins: count(angular_bins, "angular_bins")?,
+        seed: arg_seed(seed, "seed")?,
         ..Default::default()
     };
     let sc = py.detach(|| -> crate::Result<_> {
@@ -132,15 +139,15 @@ impl PyTemplateDatabase {
     fn build(
         py: Python<'_>,
         model_shape: Option<&Bound<PyAny>>,
-        width: usize,
-        height: usize,
+        width: i128,
+        height: i128,
         distance: f64,
         field_height: f64,
         renderer: &str,
-        samples: usize,
-        radial_bins: usize,
-        angular_bins: usize,
-        seed: u64,
+        samples: i128,
+        radial_bins: i128,
+        angular_bins: i128,
+        seed: i128,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
@@ -183,14 +190,14 @@ impl PyTemplateDatabase {
         py: Python<'_>,
         depths: &Bound<PyAny>,
         model_shape: Option<&Bound<PyAny>>,
-        width: usize,
-        height: usize,
+        width: i128,
+        height: i128,
         distance: f64,
         field_height: f64,
-        samples: usize,
-        radial_bins: usize,
-        angular_bins: usize,
-        seed: u64,
+        samples: i128,
+        radial_bins: i128,
+        angular_bins: i128,
+        seed: i128,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
         let cfg = config_of(
@@ -205,6 +212,7 @@ impl PyTemplateDatabase {
             seed,
         )?;
         let d = f32_array(depths, "depths", Some(3), false)?;
+        let (height, width) = (cfg.height, cfg.width);
         if d.shape != [NUM_TEMPLATES, height, width] {
             return Err(Error::invalid(
                 "depths",
@@ -226,10 +234,10 @@ impl PyTemplateDatabase {
     #[allow(clippy::too_many_arguments)]
     fn render_template<'py>(
         py: Python<'py>,
-        index: usize,
+        index: i128,
         model_shape: Option<&Bound<'py, PyAny>>,
-        width: usize,
-        height: usize,
+        width: i128,
+        height: i128,
         distance: f64,
         field_height: f64,
         renderer: &str,
@@ -242,13 +250,14 @@ impl PyTemplateDatabase {
             distance,
             field_height,
             renderer,
-            d.descriptor.samples,
-            d.descriptor.radial_bins,
-            d.descriptor.angular_bins,
-            d.descriptor.seed,
+            d.descriptor.samples as i128,
+            d.descriptor.radial_bins as i128,
+            d.descriptor.angular_bins as i128,
+            d.descriptor.seed as i128,
         )?;
+        let index = count(index, "index")?;
         let depth = py.detach(|| crate::templates::render_template(&model, &cfg, index))?;
-        Ok(to_numpy(py, depth, &[height, width]))
+        Ok(to_numpy(py, depth, &[cfg.height, cfg.width]))
     }
 
     /// Super-quadric meshes of template `index` (all segments in one mesh, template
@@ -257,12 +266,14 @@ impl PyTemplateDatabase {
     #[pyo3(signature = (index, model_shape=None, *, distance=3.0, rings=16, sectors=20))]
     fn template_mesh<'py>(
         py: Python<'py>,
-        index: usize,
+        index: i128,
         model_shape: Option<&Bound<'py, PyAny>>,
         distance: f64,
-        rings: usize,
-        sectors: usize,
+        rings: i128,
+        sectors: i128,
     ) -> PyResult<MeshArrays<'py>> {
+        let index = count(index, "index")?;
+        let (rings, sectors) = (count(rings, "rings")?, count(sectors, "sectors")?);
         if index >= NUM_TEMPLATES {
             return Err(
                 Error::invalid("index", format!("must be < {NUM_TEMPLATES}, got {index}")).into(),
@@ -296,12 +307,15 @@ impl PyTemplateDatabase {
         depth: &Bound<'py, PyAny>,
         camera: &PyCamera,
         mask: Option<&Bound<'py, PyAny>>,
-        top_k: usize,
-        shortlist: usize,
-        representatives: usize,
+        top_k: i128,
+        shortlist: i128,
+        representatives: i128,
         location_weight: f64,
         dummy_cost: f64,
     ) -> PyResult<(Vec<Bound<'py, PyDict>>, Vec<usize>)> {
+        let top_k = count(top_k, "top_k")?;
+        let shortlist = count(shortlist, "shortlist")?;
+        let representatives = count(representatives, "representatives")?;
         let d = depth_array(depth, "depth")?;
         if d.shape.len() != 2 {
             return Err(Error::invalid("depth", "must be a 2-D image").into());
@@ -507,15 +521,15 @@ impl PyTemplateDatabase {
     fn settings(
         py: Python<'_>,
         model_shape: Option<&Bound<PyAny>>,
-        width: usize,
-        height: usize,
+        width: i128,
+        height: i128,
         distance: f64,
         field_height: f64,
         renderer: &str,
-        samples: usize,
-        radial_bins: usize,
-        angular_bins: usize,
-        seed: u64,
+        samples: i128,
+        radial_bins: i128,
+        angular_bins: i128,
+        seed: i128,
     ) -> PyResult<(String, Py<PyAny>)> {
         let model = model_of(model_shape)?;
         let cfg = config_of(
