@@ -208,17 +208,18 @@ def test_npz_readers_refuse_empty_truncated_and_missing_files(tmp_path):
 # A negative integer argument is bad input that names the argument, not an
 # OverflowError from the integer conversion.
 _IMG = np.random.default_rng(0).integers(0, 255, (40, 50), np.uint8)
+_CAM = dp.Camera(100, 100, 16, 12, 32, 24)
 _NEGATIVE_INT_CALLS = {
     "window": lambda: dp.stereo.match(_IMG, _IMG, window=-5),
     "max_disparity": lambda: dp.stereo.match(_IMG, _IMG, max_disparity=-1),
     "num_seeds": lambda: dp.stereo.match(_IMG, _IMG, num_seeds=-1),
     "min_segment": lambda: dp.stereo.match(_IMG, _IMG, min_segment=-1),
     "seed": lambda: dp.stereo.match(_IMG, _IMG, seed=-1),
-    "radius": lambda: dp.surface_normals(GOOD, dp.Camera(100, 100, 16, 12, 32, 24), radius=-1),
-    "connectivity": lambda: dp.pixel_graph(GOOD, dp.Camera(100, 100, 16, 12, 32, 24), connectivity=-4),
+    "radius": lambda: dp.surface_normals(GOOD, _CAM, radius=-1),
+    "connectivity": lambda: dp.pixel_graph(GOOD, _CAM, connectivity=-4),
     "min_component": lambda: dp.foreground_mask(GOOD, min_component=-1),
     "rings": lambda: dp.BodyModel().superquadric_meshes(dp.BodyModel.neutral_pose(), rings=-3),
-    "samples": lambda: dp.surface_context(GOOD, dp.Camera(100, 100, 16, 12, 32, 24), samples=-1),
+    "samples": lambda: dp.surface_context(GOOD, _CAM, samples=-1),
 }
 
 
