@@ -106,9 +106,15 @@ fn relax_row(
     path: &mut [usize],
 ) -> (f64, usize) {
     #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { relax_row_avx2(row, v, base, i, shortest, path) };
+    {
+        if crate::cpu::avx512() {
+            // SAFETY: the CPU supports AVX-512F (checked by `avx512`).
+            return unsafe { relax_row_avx512(row, v, base, i, shortest, path) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU supports AVX2 (checked just above).
+            return unsafe { relax_row_avx2(row, v, base, i, shortest, path) };
+        }
     }
     relax_columns(row, v, base, i, shortest, path, 0, (f64::INFINITY, NONE))
 }
@@ -139,6 +145,59 @@ fn relax_columns(
         }
     }
     (least, pick)
+}
+
+/// [`relax_row`] with AVX-512, eight columns at a time, the blends and the path
+/// writes under mask registers; the same arithmetic and the same result.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn relax_row_avx512(
+    row: &[f64],
+    v: &[f64],
+    base: f64,
+    i: usize,
+    shortest: &mut [f64],
+    path: &mut [usize],
+) -> (f64, usize) {
+    use std::arch::x86_64::*;
+    let n = shortest.len();
+    assert!(row.len() >= n && v.len() >= n && path.len() >= n);
+    let full = n / 8 * 8;
+    let basev = _mm512_set1_pd(base);
+    let rowv = _mm512_set1_epi64(i as i64);
+    let (mut least, mut at) = (_mm512_set1_pd(f64::INFINITY), _mm512_set1_epi64(-1));
+    let (mut index, eight) = (
+        _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7),
+        _mm512_set1_epi64(8),
+    );
+    for c in (0..full).step_by(8) {
+        // SAFETY: c + 8 <= full <= n, within every slice (asserted above); usize is
+        // 64 bits on x86_64.
+        let r = _mm512_sub_pd(
+            _mm512_add_pd(basev, _mm512_loadu_pd(row.as_ptr().add(c))),
+            _mm512_loadu_pd(v.as_ptr().add(c)),
+        );
+        let s = _mm512_loadu_pd(shortest.as_ptr().add(c));
+        let closer = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(r, s);
+        let s = _mm512_mask_blend_pd(closer, s, r);
+        _mm512_storeu_pd(shortest.as_mut_ptr().add(c), s);
+        _mm512_mask_storeu_epi64(path.as_mut_ptr().add(c) as *mut i64, closer, rowv);
+        let lower = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(s, least);
+        least = _mm512_mask_blend_pd(lower, least, s);
+        at = _mm512_mask_blend_epi64(lower, at, index);
+        index = _mm512_add_epi64(index, eight);
+    }
+    // Across the lanes: the least value, at its first column.
+    let (mut lanes, mut cols) = ([0.0f64; 8], [0i64; 8]);
+    _mm512_storeu_pd(lanes.as_mut_ptr(), least);
+    _mm512_storeu_epi64(cols.as_mut_ptr(), at);
+    let mut best = (f64::INFINITY, NONE);
+    for (&d, &j) in lanes.iter().zip(&cols) {
+        if j >= 0 && (d < best.0 || (d == best.0 && (j as usize) < best.1)) {
+            best = (d, j as usize);
+        }
+    }
+    relax_columns(row, v, base, i, shortest, path, full, best)
 }
 
 /// [`relax_row`] with AVX2, four columns at a time; the same arithmetic and the same
@@ -449,8 +508,9 @@ mod tests {
         }
     }
 
-    /// The AVX2 scan against the portable one: same distances, paths, least and
-    /// pick, with settled (NaN) columns, ties and lengths that are not multiples of 4.
+    /// The AVX2 and AVX-512 scans (each where the CPU has it) against the portable
+    /// one: same distances, paths, least and pick, with settled (NaN) columns, ties
+    /// and lengths that are not multiples of 4 or 8.
     #[test]
     fn vectorised_relaxation_equals_portable() {
         let mut s = 5u64;
@@ -460,7 +520,24 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (s >> 33) as usize
         };
-        for n in [1usize, 3, 4, 7, 16, 101] {
+        type Kernel = fn(&[f64], &[f64], f64, usize, &mut [f64], &mut [usize]) -> (f64, usize);
+        let mut kernels: Vec<(&str, Kernel)> = vec![("dispatch", relax_row)];
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: only called on a CPU with AVX2 (checked just above).
+                kernels.push(("avx2", |r, v, b, i, s, p| unsafe {
+                    relax_row_avx2(r, v, b, i, s, p)
+                }));
+            }
+            if std::arch::is_x86_feature_detected!("avx512f") {
+                // SAFETY: only called on a CPU with AVX-512F (checked just above).
+                kernels.push(("avx512", |r, v, b, i, s, p| unsafe {
+                    relax_row_avx512(r, v, b, i, s, p)
+                }));
+            }
+        }
+        for n in [1usize, 3, 4, 7, 8, 9, 16, 17, 101] {
             for _ in 0..20 {
                 let row: Vec<f64> = (0..n).map(|_| (next() % 5) as f64 * 0.25).collect();
                 let v: Vec<f64> = (0..n).map(|_| (next() % 3) as f64 * -0.5).collect();
@@ -473,9 +550,7 @@ mod tests {
                     .collect();
                 let path: Vec<usize> = (0..n).map(|_| next() % 7).collect();
                 let base = (next() % 3) as f64 * 0.5 - 0.5;
-                let (mut s1, mut p1) = (shortest.clone(), path.clone());
                 let (mut s2, mut p2) = (shortest.clone(), path.clone());
-                let fast = relax_row(&row, &v, base, 9, &mut s1, &mut p1);
                 let plain = relax_columns(
                     &row,
                     &v,
@@ -486,11 +561,15 @@ mod tests {
                     0,
                     (f64::INFINITY, NONE),
                 );
-                assert_eq!(fast.1, plain.1);
-                assert_eq!(fast.0.to_bits(), plain.0.to_bits());
-                assert_eq!(p1, p2);
                 let bits = |x: &[f64]| x.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
-                assert_eq!(bits(&s1), bits(&s2));
+                for (name, kernel) in &kernels {
+                    let (mut s1, mut p1) = (shortest.clone(), path.clone());
+                    let fast = kernel(&row, &v, base, 9, &mut s1, &mut p1);
+                    assert_eq!(fast.1, plain.1, "{name}");
+                    assert_eq!(fast.0.to_bits(), plain.0.to_bits(), "{name}");
+                    assert_eq!(p1, p2, "{name}");
+                    assert_eq!(bits(&s1), bits(&s2), "{name}");
+                }
             }
         }
     }

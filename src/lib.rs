@@ -34,6 +34,7 @@ pub mod assignment;
 pub mod body;
 pub mod camera;
 pub mod cloud;
+mod cpu;
 pub mod descriptor;
 pub mod error;
 pub mod fit;

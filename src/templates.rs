@@ -1301,8 +1301,9 @@ const PRUNE_BOUND_SLACK: f32 = 1e-8;
 
 /// A query's descriptors and positions laid out for the exact stage's cost matrices:
 /// value `d` of sample `i` at `d · stride + i`, positions as two rows, every row
-/// zero-padded to `stride` (the sample count rounded up to 16), so that a vector
-/// holds one value of 8 consecutive samples. Made once per query.
+/// zero-padded to `stride` (the sample count rounded up to 32), so that a vector
+/// holds one value of 8 (AVX2) or 16 (AVX-512) consecutive samples. Made once per
+/// query.
 pub struct QueryColumns {
     values: Vec<f32>,
     x: Vec<f32>,
@@ -1313,7 +1314,8 @@ pub struct QueryColumns {
 impl QueryColumns {
     pub fn new(q: &SurfaceContext) -> Self {
         let (n, dim) = (q.len(), q.dim);
-        let stride = n.next_multiple_of(16);
+        // A multiple of 32: the AVX-512 kernel reads two 16-lane vectors per block.
+        let stride = n.next_multiple_of(32);
         let mut values = vec![0.0f32; dim * stride];
         for i in 0..n {
             for (d, &v) in q.descriptor(i).iter().enumerate() {
@@ -1355,12 +1357,16 @@ fn cost_matrix(
     cost.resize(n * m, 0.0);
     let mut from = 0;
     #[cfg(target_arch = "x86_64")]
-    if q.dim == t.dim
-        && std::arch::is_x86_feature_detected!("avx2")
-        && std::arch::is_x86_feature_detected!("fma")
-    {
-        // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-        from = unsafe { cost_rows_fma(columns, t, lw, n, cost) };
+    if q.dim == t.dim {
+        if crate::cpu::avx512() {
+            // SAFETY: the CPU supports AVX-512F (checked by `avx512`).
+            from = unsafe { cost_rows_avx512(columns, t, lw, n, cost) };
+        } else if std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU supports AVX2 and FMA (checked just above).
+            from = unsafe { cost_rows_fma(columns, t, lw, n, cost) };
+        }
     }
     let _ = columns; // read by the x86_64 kernel only
     for j in from..m {
@@ -1422,6 +1428,77 @@ unsafe fn cost_rows_fma(
                     let c = _mm256_add_ps(_mm256_sqrt_ps(a), _mm256_mul_ps(lwv, loc));
                     _mm256_storeu_ps(out.as_mut_ptr(), c);
                     let row = &mut cost[j * n + i..j * n + n.min(i + 8)];
+                    for (o, &v) in row.iter_mut().zip(&out) {
+                        *o = v as f64;
+                    }
+                }
+            }
+        }
+    }
+    quads
+}
+
+/// [`cost_rows_fma`] with AVX-512: a vector holds 16 query samples, and 4 template
+/// samples × 32 query samples give 8 chains. Each lane sums along the descriptor in the
+/// same order with the same fused operations, so the values equal the AVX2 kernel's
+/// bit for bit (tested).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn cost_rows_avx512(
+    columns: &QueryColumns,
+    t: &SurfaceContext,
+    lw: f32,
+    n: usize,
+    cost: &mut [f64],
+) -> usize {
+    use std::arch::x86_64::*;
+    let (stride, dim) = (columns.stride, t.dim);
+    assert!(
+        columns.values.len() >= dim * stride
+            && stride >= n
+            && stride.is_multiple_of(32)
+            && columns.x.len() >= stride
+            && columns.y.len() >= stride
+            && cost.len() >= n * t.len()
+    );
+    let quads = t.len() / 4 * 4;
+    let lwv = _mm512_set1_ps(lw);
+    let mut out = [0.0f32; 16];
+    for j0 in (0..quads).step_by(4) {
+        let b: [&[f32]; 4] = std::array::from_fn(|k| t.descriptor(j0 + k));
+        for i0 in (0..n).step_by(32) {
+            let mut acc = [[_mm512_setzero_ps(); 2]; 4];
+            for d in 0..dim {
+                // SAFETY: d·stride + i0 + 32 <= dim·stride (i0 < n <= stride, stride a
+                // multiple of 32), asserted above.
+                let col = columns.values.as_ptr().add(d * stride + i0);
+                let q = [_mm512_loadu_ps(col), _mm512_loadu_ps(col.add(16))];
+                for (acc, b) in acc.iter_mut().zip(&b) {
+                    let bd = _mm512_set1_ps(*b.get_unchecked(d));
+                    for (a, &q) in acc.iter_mut().zip(&q) {
+                        let e = _mm512_sub_ps(q, bd);
+                        *a = _mm512_fmadd_ps(e, e, *a);
+                    }
+                }
+            }
+            for (k, acc) in acc.iter().enumerate() {
+                let j = j0 + k;
+                let (tx, ty) = (
+                    _mm512_set1_ps(t.positions[j][0]),
+                    _mm512_set1_ps(t.positions[j][1]),
+                );
+                for (h, &a) in acc.iter().enumerate() {
+                    let i = i0 + 16 * h;
+                    if i >= n {
+                        break;
+                    }
+                    let dx = _mm512_sub_ps(_mm512_loadu_ps(columns.x.as_ptr().add(i)), tx);
+                    let dy = _mm512_sub_ps(_mm512_loadu_ps(columns.y.as_ptr().add(i)), ty);
+                    let loc =
+                        _mm512_sqrt_ps(_mm512_add_ps(_mm512_mul_ps(dx, dx), _mm512_mul_ps(dy, dy)));
+                    let c = _mm512_add_ps(_mm512_sqrt_ps(a), _mm512_mul_ps(lwv, loc));
+                    _mm512_storeu_ps(out.as_mut_ptr(), c);
+                    let row = &mut cost[j * n + i..j * n + n.min(i + 16)];
                     for (o, &v) in row.iter_mut().zip(&out) {
                         *o = v as f64;
                     }
@@ -1717,6 +1794,41 @@ mod tests {
                 && !q.len().is_multiple_of(16),
             "no template or query exercises the leftover rows and columns"
         );
+    }
+
+    /// The AVX-512 and AVX2 cost kernels write the same rows, bit for bit (where the
+    /// CPU has both).
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn cost_kernels_agree_bit_for_bit() {
+        if !(std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma"))
+        {
+            eprintln!("skipped: this CPU lacks AVX-512F, AVX2 or FMA");
+            return;
+        }
+        let db = super::eval::database();
+        let cam = Camera::itop();
+        let mut rng = super::eval::Rng(5);
+        for query in [7usize, 300, 600] {
+            let q = super::eval::query_context(db, query, &mut rng, &cam);
+            let columns = QueryColumns::new(&q);
+            for t in [0usize, 42, 301, 767] {
+                let tc = &db.templates[t].context;
+                let n = q.len();
+                let (mut a, mut b) = (vec![-1.0; n * tc.len()], vec![-1.0; n * tc.len()]);
+                // SAFETY: the CPU has the features (checked above).
+                let rows_a = unsafe { cost_rows_avx512(&columns, tc, 0.1, n, &mut a) };
+                let rows_b = unsafe { cost_rows_fma(&columns, tc, 0.1, n, &mut b) };
+                assert_eq!(rows_a, rows_b);
+                assert_eq!(
+                    a[..rows_a * n],
+                    b[..rows_b * n],
+                    "query {query}, template {t}"
+                );
+            }
+        }
     }
 
     /// The short list with the early give-up is the exhaustive ranking's: the best

@@ -1,0 +1,23 @@
+//! Run-time choice of the vector kernels outside the body model (the template matching's
+//! cost matrices and the assignment's row relaxation).
+
+/// Whether the AVX-512 kernels may run: the CPU has AVX-512F and the environment
+/// variable `DEPTHPOSE_NO_AVX512` is not set (it also selects the body model's AVX2
+/// stream, see `body::ellipsoid`), so that tests and benchmarks can take the AVX2 path
+/// on an AVX-512 machine. Decided once per process.
+#[inline]
+pub(crate) fn avx512() -> bool {
+    use std::sync::OnceLock;
+    static ALLOWED: OnceLock<bool> = OnceLock::new();
+    *ALLOWED.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            std::arch::is_x86_feature_detected!("avx512f")
+                && std::env::var_os("DEPTHPOSE_NO_AVX512").is_none()
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
+        }
+    })
+}
