@@ -231,6 +231,23 @@ def test_negative_integer_arguments_are_named(name):
         dp.stereo.match(_IMG, _IMG, seed=2**64)
 
 
+@pytest.mark.parametrize(
+    ("call", "name"),
+    [
+        (lambda v: dp.Camera(100, 100, 16, 12, v, 24), "width"),
+        (lambda v: dp.FitConfig(stride=v), "stride"),
+        (lambda v: dp.FitConfig(max_iterations=v), "max_iterations"),
+        (lambda v: dp.graphcut.Graph(v), "n_nodes"),
+        (lambda v: dp.stereo.match(_IMG, _IMG, window=v), "window"),
+    ],
+)
+def test_huge_integer_arguments_are_named(call, name):
+    # Beyond 64 bits too: no OverflowError, and the message shows the value given.
+    for v in [2**64 + 1, 10**30]:
+        with pytest.raises(dp.DepthPoseError, match=f"{name}.*{v}"):
+            call(v)
+
+
 # ---- foreground on the shared data ----------------------------------------------------------
 def test_foreground_iou_on_shared_synthetic_sequences():
     folder = shared("synth")

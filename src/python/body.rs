@@ -444,9 +444,9 @@ impl PyBodyModel {
         camera: &PyCamera,
         poses: &Bound<'_, PyAny>,
         masks: Option<&Bound<'_, PyAny>>,
-        iterations: i64,
+        iterations: i128,
         config: Option<&PyFitConfig>,
-        lm_iterations: i64,
+        lm_iterations: i128,
         prior_weight: f64,
         bounds: (f64, f64),
     ) -> PyResult<PyShapeFitResult> {
@@ -496,9 +496,9 @@ impl PyBodyModel {
                 )
             }
         };
-        let count = |v: i64, name: &str| -> PyResult<usize> {
-            if v >= 1 {
-                Ok(v as usize)
+        let count = |v: i128, name: &str| -> PyResult<usize> {
+            if let Some(v) = usize::try_from(v).ok().filter(|&v| v >= 1) {
+                Ok(v)
             } else {
                 Err(Error::invalid(name, format!("must be >= 1, got {v}")).into())
             }

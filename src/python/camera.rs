@@ -13,12 +13,14 @@ pub struct PyCamera {
 impl PyCamera {
     #[new]
     #[pyo3(signature = (fx, fy, cx, cy, width, height))]
-    fn new(fx: f64, fy: f64, cx: f64, cy: f64, width: i64, height: i64) -> PyResult<Self> {
-        let size = |v: i64, n: &str| -> PyResult<usize> {
+    fn new(fx: f64, fy: f64, cx: f64, cy: f64, width: i128, height: i128) -> PyResult<Self> {
+        let size = |v: i128, n: &str| -> PyResult<usize> {
             if v <= 0 {
                 Err(crate::Error::invalid(n, format!("must be positive, got {v}")).into())
             } else {
-                Ok(v as usize)
+                usize::try_from(v).map_err(|_| {
+                    crate::Error::invalid(n, format!("is unreasonably large: {v}")).into()
+                })
             }
         };
         Ok(PyCamera {
@@ -59,7 +61,7 @@ impl PyCamera {
 
     /// A camera from [fx, fy, cx, cy] and an image shape (height, width).
     #[staticmethod]
-    fn from_intrinsics(intrinsics: Vec<f64>, shape: (i64, i64)) -> PyResult<Self> {
+    fn from_intrinsics(intrinsics: Vec<f64>, shape: (i128, i128)) -> PyResult<Self> {
         if intrinsics.len() != 4 {
             return Err(crate::Error::invalid(
                 "intrinsics",

@@ -9,7 +9,7 @@ use crate::body::{
 };
 use crate::cloud::Connectivity;
 use crate::error::Error;
-use crate::fit::{self, EmConfig, FitConfig, Loss, PosePrior};
+use crate::fit::{self, EmConfig, FitConfig, Loss, PosePrior, MAX_STRIDE};
 use nalgebra::Vector3;
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -132,29 +132,30 @@ impl PyFitConfig {
         contrast_sigma: Option<f64>,
         outlier_distance: Option<f64>,
         outlier_distance_start: Option<f64>,
-        anneal_iterations: Option<i64>,
+        anneal_iterations: Option<i128>,
         truncation_factor: Option<f64>,
-        max_iterations: Option<i64>,
+        max_iterations: Option<i128>,
         label_change_tolerance: Option<f64>,
         energy_tolerance: Option<f64>,
-        expansion_cycles: Option<i64>,
+        expansion_cycles: Option<i128>,
         free_space_weight: Option<f64>,
         free_space_margin: Option<f64>,
         free_space_truncation: Option<f64>,
-        lm_max_iterations: Option<i64>,
-        connectivity: i64,
-        stride: i64,
+        lm_max_iterations: Option<i128>,
+        connectivity: i128,
+        stride: i128,
         label_all_pixels: bool,
-        full_resolution_iterations: i64,
+        full_resolution_iterations: i128,
         recentred_start: bool,
         swapped_limb_starts: bool,
     ) -> PyResult<Self> {
         let d = EmConfig::default();
-        let count = |v: Option<i64>, default: usize, name: &str| -> PyResult<usize> {
+        let count = |v: Option<i128>, default: usize, name: &str| -> PyResult<usize> {
             match v {
                 None => Ok(default),
-                Some(v) if v >= 0 => Ok(v as usize),
-                Some(v) => Err(Error::invalid(name, format!("must be >= 0, got {v}")).into()),
+                Some(v) => usize::try_from(v).map_err(|_| {
+                    Error::invalid(name, format!("must be an integer >= 0, got {v}")).into()
+                }),
             }
         };
         let cfg = PyFitConfig {
@@ -176,8 +177,22 @@ impl PyFitConfig {
             free_space_margin: free_space_margin.unwrap_or(d.free_space_margin),
             free_space_truncation: free_space_truncation.unwrap_or(d.free_space_truncation),
             lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
-            connectivity: u32::try_from(connectivity).unwrap_or(0),
-            stride: usize::try_from(stride).unwrap_or(0),
+            connectivity: match connectivity {
+                4 | 8 => connectivity as u32,
+                _ => {
+                    return Err(Error::invalid(
+                        "connectivity",
+                        format!("must be 4 or 8, got {connectivity}"),
+                    )
+                    .into())
+                }
+            },
+            stride: usize::try_from(stride)
+                .ok()
+                .filter(|s| (1..=MAX_STRIDE).contains(s))
+                .ok_or_else(|| {
+                    Error::invalid("stride", format!("must be 1..={MAX_STRIDE}, got {stride}"))
+                })?,
             label_all_pixels,
             full_resolution_iterations: count(
                 Some(full_resolution_iterations),

@@ -114,15 +114,15 @@ pub struct PyGraph {
 impl PyGraph {
     #[new]
     #[pyo3(signature = (n_nodes, dtype=None, edge_hint=0))]
-    fn new(n_nodes: i64, dtype: Option<&Bound<PyAny>>, edge_hint: i64) -> PyResult<Self> {
-        if n_nodes <= 0 || n_nodes > MAX_NODES as i64 {
+    fn new(n_nodes: i128, dtype: Option<&Bound<PyAny>>, edge_hint: i128) -> PyResult<Self> {
+        if n_nodes <= 0 || n_nodes > MAX_NODES as i128 {
             return Err(Error::invalid(
                 "n_nodes",
                 format!("must be in 1..={MAX_NODES}, got {n_nodes}"),
             )
             .into());
         }
-        let max_hint = i64::from(u32::MAX) / 2;
+        let max_hint = i128::from(u32::MAX) / 2;
         if !(0..=max_hint).contains(&edge_hint) {
             return Err(Error::invalid(
                 "edge_hint",
@@ -279,10 +279,11 @@ impl PyGraph {
     /// A fresh solve of a large grid uses up to `threads` threads (None: all of the
     /// pool's); the cut does not depend on it.
     #[pyo3(signature = (threads=None))]
-    fn maxflow(&mut self, py: Python<'_>, threads: Option<i64>) -> PyResult<Py<PyAny>> {
+    fn maxflow(&mut self, py: Python<'_>, threads: Option<i128>) -> PyResult<Py<PyAny>> {
         let threads = match threads {
             None => 0,
-            Some(t) if t >= 1 => t as usize,
+            // More threads than the pool has gain nothing; a huge count is just all.
+            Some(t) if t >= 1 => usize::try_from(t).unwrap_or(usize::MAX),
             Some(t) => {
                 return Err(
                     Error::invalid("threads", format!("must be at least 1, got {t}")).into(),
@@ -320,7 +321,12 @@ impl PyGraph {
 /// Edges (E, 2) int64 of an h×w pixel grid with row-major node ids, 4- or 8-connected.
 #[pyfunction]
 #[pyo3(signature = (h, w, connectivity=4))]
-fn grid_edges<'py>(py: Python<'py>, h: i64, w: i64, connectivity: i64) -> PyResult<I64Array<'py>> {
+fn grid_edges<'py>(
+    py: Python<'py>,
+    h: i128,
+    w: i128,
+    connectivity: i128,
+) -> PyResult<I64Array<'py>> {
     for (name, v) in [("h", h), ("w", w)] {
         if v <= 0 {
             return Err(Error::invalid(name, format!("must be positive, got {v}")).into());
@@ -504,7 +510,7 @@ fn solve<'py>(
     weights: &Bound<'py, PyAny>,
     pairwise: Option<&Bound<'py, PyAny>>,
     init: Option<&Bound<'py, PyAny>>,
-    max_cycles: i64,
+    max_cycles: i128,
     f: Solver<f64>,
     i: Solver<i64>,
 ) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
@@ -516,7 +522,8 @@ fn solve<'py>(
         .into());
     }
     let cfg = MoveConfig {
-        max_cycles: max_cycles as usize,
+        // Beyond usize the cycles are unbounded anyway (expansion stops at a fixed point).
+        max_cycles: usize::try_from(max_cycles).unwrap_or(usize::MAX),
     };
     let init = init_arg(init)?;
     if integer_mode(unary, weights, pairwise) {
@@ -549,7 +556,7 @@ fn alpha_expansion<'py>(
     weights: &Bound<'py, PyAny>,
     pairwise: Option<&Bound<'py, PyAny>>,
     init: Option<&Bound<'py, PyAny>>,
-    max_cycles: i64,
+    max_cycles: i128,
 ) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
     solve(
         py,
@@ -574,7 +581,7 @@ fn alpha_beta_swap<'py>(
     weights: &Bound<'py, PyAny>,
     pairwise: Option<&Bound<'py, PyAny>>,
     init: Option<&Bound<'py, PyAny>>,
-    max_cycles: i64,
+    max_cycles: i128,
 ) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
     solve(
         py,
