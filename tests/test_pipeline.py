@@ -111,6 +111,26 @@ def test_cli_estimate_npz(tmp_path, wave, templates):
     assert len((tmp_path / "p.jsonl").read_text().splitlines()) == 10
 
 
+def test_cli_refuses_an_unwritable_output_before_the_work(tmp_path, wave, capsys):
+    from depthpose.cli import main
+
+    seq, _, _ = wave
+    path = tmp_path / "seq.npz"
+    synth.save(path, seq)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    # --out inside a regular file: no folder can be made there. The check runs before
+    # the frames are estimated, so nothing is printed per frame.
+    rc = main(["estimate", str(path), "--out", str(blocker / "pred.npz")])
+    err = capsys.readouterr().err
+    assert rc == 2 and "cannot write there" in err and "frame 1/" not in err
+    # Other unwritable outputs (here the JSON lines) are clean errors too.
+    rc = main(["estimate", str(path), "--out", str(tmp_path / "p.npz"),
+               "--jsonl", str(blocker / "p.jsonl")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert rc == 2 and "depthpose: error:" in err and "p.jsonl" in err
+
+
 def test_bad_camera_argument():
     with pytest.raises(dp.DepthPoseError, match="camera"):
         PoseEstimator("not a camera")  # type: ignore[arg-type]

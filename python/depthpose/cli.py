@@ -4,14 +4,26 @@ from __future__ import annotations
 
 import argparse
 import sys
+import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
-from . import DepthPoseError, __version__
+from . import DepthPoseError, InvalidInputError, __version__
 
 __all__ = ["main"]
+
+
+def _check_writable(out: Path) -> None:
+    """Creates `out`'s folder and writes (and removes) a probe file there, so that a long
+    job whose output cannot be written fails before the work, not after it."""
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=out.parent, prefix=".depthpose-probe-"):
+            pass
+    except OSError as e:
+        raise InvalidInputError(f"--out {out}: cannot write there ({e.strerror or e})") from None
 
 
 def _cmd_foreground(args: argparse.Namespace) -> int:
@@ -44,6 +56,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     from .sequence import open_sequence
 
     seq = open_sequence(args.input, intrinsics=args.intrinsics, depth_scale=args.depth_scale)
+    out = Path(args.out)
+    _check_writable(out)
     viz_dir = Path(args.viz) if args.viz else None
     if viz_dir:
         viz_dir.mkdir(parents=True, exist_ok=True)
@@ -74,8 +88,6 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         jsonl.close()
     for e in res.errors:
         print(f"frame {e['frame']}: {e['error']}", file=sys.stderr)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
     np.savez(
         out, joints=res.joints, pose=res.pose, confidence=res.confidence,
         joint_names=np.array(JOINT_NAMES),
@@ -199,6 +211,10 @@ def main(argv: list[str] | None = None) -> int:
         rc = int(args.func(args))
     except DepthPoseError as e:
         print(f"depthpose: error: {e}", file=sys.stderr)
+        return 2
+    except OSError as e:  # e.g. an output file that cannot be written
+        where = f"{e.filename}: " if e.filename else ""
+        print(f"depthpose: error: {where}{e.strerror or e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("depthpose: interrupted", file=sys.stderr)
