@@ -119,10 +119,11 @@ impl TemplateConfig {
         )?;
         crate::error::ensure_positive(self.distance, "distance")?;
         crate::error::ensure_positive(self.field_height, "field_height")?;
+        let divisions = 3..=crate::body::superquadric::MAX_MESH_DIVISIONS;
         ensure(
-            self.mesh.rings >= 3 && self.mesh.sectors >= 3,
+            divisions.contains(&self.mesh.rings) && divisions.contains(&self.mesh.sectors),
             "mesh",
-            || "needs at least 3 rings and 3 sectors".to_string(),
+            || format!("rings and sectors must be within {divisions:?}"),
         )
     }
 

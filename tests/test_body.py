@@ -230,6 +230,21 @@ def test_superquadric_meshes():
     assert np.all(j >= lo - 1e-9) and np.all(j <= hi + 1e-9)
 
 
+def test_mesh_resolution_is_bounded():
+    # 10**6 rings would ask for ~10**12 vertices: refused up front (not a memory abort),
+    # by the body model's meshes and the template meshes alike.
+    from depthpose import _core
+
+    m = BodyModel()
+    for rings, sectors in [(2, 10), (10, 2), (1001, 10), (10**6, 10**6)]:
+        with pytest.raises(depthpose.DepthPoseError, match="rings/sectors"):
+            m.superquadric_meshes(m.neutral_pose(), rings, sectors)
+        with pytest.raises(depthpose.DepthPoseError, match="rings/sectors"):
+            _core._TemplateDatabase.template_mesh(0, None, rings=rings, sectors=sectors)
+    v, f = m.superquadric_meshes(m.neutral_pose(), 1000, 3)[0]
+    assert len(v) > 0 and len(f) > 0
+
+
 def test_exported_from_package():
     assert depthpose.BodyModel is BodyModel
 

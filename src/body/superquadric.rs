@@ -75,6 +75,10 @@ fn profile(shape: &SuperquadricShape, w: f64) -> f64 {
     ((1.0 + shape.taper * w) * (1.0 - (1.0 - 2.0 * w).abs().powf(shape.exponent))).max(0.0)
 }
 
+/// The most rings or sectors a mesh may have (a million vertices per segment; more
+/// would be a memory error, not a finer picture).
+pub const MAX_MESH_DIVISIONS: usize = 1000;
+
 /// Mesh of eq. 1 in its own frame (z from 0 to z0), scaled so the widest cross-section
 /// has half-axes x0, y0. Faces point outward.
 pub fn superquadric_mesh(
@@ -99,8 +103,16 @@ pub fn superquadric_mesh(
             format!("must be in (-1, 1), got {}", shape.taper),
         ));
     }
-    if cfg.rings < 3 || cfg.sectors < 3 {
-        return Err(Error::invalid("cfg", "need at least 3 rings and 3 sectors"));
+    if !(3..=MAX_MESH_DIVISIONS).contains(&cfg.rings)
+        || !(3..=MAX_MESH_DIVISIONS).contains(&cfg.sectors)
+    {
+        return Err(Error::invalid(
+            "rings/sectors",
+            format!(
+                "must be within 3..={MAX_MESH_DIVISIONS}, got {} and {}",
+                cfg.rings, cfg.sectors
+            ),
+        ));
     }
     // Rings clustered toward the ends, where the profile changes fastest.
     let ws: Vec<f64> = (1..cfg.rings)

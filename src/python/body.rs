@@ -363,16 +363,10 @@ impl PyBodyModel {
     ) -> PyResult<Vec<(F64Array<'py>, I64Array<'py>)>> {
         let (rings, sectors) = (count(rings, "rings")?, count(sectors, "sectors")?);
         let p = pose_arg(pose, "pose")?;
-        if !(3..=1000).contains(&rings) || !(3..=1000).contains(&sectors) {
-            return Err(Error::invalid(
-                "rings/sectors",
-                format!("must be within 3..=1000, got {rings} and {sectors}"),
-            )
-            .into());
-        }
-        let meshes = self
-            .inner
-            .superquadric_meshes(&p, &MeshConfig { rings, sectors })?;
+        let meshes = py.detach(|| {
+            self.inner
+                .superquadric_meshes(&p, &MeshConfig { rings, sectors })
+        })?;
         Ok(meshes
             .into_iter()
             .map(|m| {

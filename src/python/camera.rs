@@ -170,15 +170,16 @@ impl PyCamera {
             .into());
         }
         let cam = self.inner;
-        let out: Vec<f64> = uv
-            .data
-            .chunks_exact(2)
-            .zip(&z.data)
-            .flat_map(|(q, &d)| {
-                let p = cam.back_project(q[0], q[1], d);
-                [p.x, p.y, p.z]
-            })
-            .collect();
+        let out: Vec<f64> = py.detach(|| {
+            uv.data
+                .chunks_exact(2)
+                .zip(&z.data)
+                .flat_map(|(q, &d)| {
+                    let p = cam.back_project(q[0], q[1], d);
+                    [p.x, p.y, p.z]
+                })
+                .collect()
+        });
         Ok(super::arrays::to_numpy(py, out, &[z.shape[0], 3]))
     }
 

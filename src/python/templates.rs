@@ -281,10 +281,12 @@ impl PyTemplateDatabase {
         }
         crate::error::ensure_positive(distance, "distance")?;
         let model = model_of(model_shape)?;
-        let meshes = model.superquadric_meshes(
-            &template_pose(index, distance),
-            &MeshConfig { rings, sectors },
-        )?;
+        let meshes = py.detach(|| {
+            model.superquadric_meshes(
+                &template_pose(index, distance),
+                &MeshConfig { rings, sectors },
+            )
+        })?;
         let (mut v, mut f) = (Vec::new(), Vec::new());
         for m in &meshes {
             let base = (v.len() / 3) as i64;
