@@ -128,6 +128,8 @@ def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
         ("finals", 2.5),
         ("final_iterations", 0),
         ("final_iterations", 3.5),
+        ("candidates", 0),
+        ("candidates", 769),
     ],
 )
 def test_nonsense_calibration_settings_are_rejected(field, value):

@@ -97,6 +97,9 @@ def test_bad_input_names_the_argument():
         match(left, right, similarity="sad")
     with pytest.raises(InvalidInputError, match="max_disparity.*-3"):
         match(left, right, max_disparity=-3)
+    # A seed count that could only be an allocation failure (it aborted the process).
+    with pytest.raises(InvalidInputError, match="num_seeds"):
+        match(left, right, num_seeds=10**12)
 
 
 def test_depth_from_disparity():

@@ -147,6 +147,8 @@ class PipelineConfig:
                 raise InvalidInputError(f"{name}: expected a {what} in [{low}, {high}], got {v!r}")
 
         count("candidates", 1)
+        if self.candidates > 768:  # the template search's top_k
+            raise InvalidInputError(f"candidates: expected 1..768, got {self.candidates!r}")
         count("hypotheses", 0)
         count("finals", 1)
         count("candidate_iterations", 1)

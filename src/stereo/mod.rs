@@ -235,6 +235,16 @@ pub fn match_stereo_seeded(
         "num_seeds",
         || "is 0 and no seeds were given: nothing to grow from".to_string(),
     )?;
+    // Each random seed is a line search from a random pixel: more than the pixels only
+    // repeat them (and a huge count would be a failed allocation, not a result). The
+    // default count is allowed on any image, however small.
+    let most_seeds = (width * height).max(StereoConfig::default().num_seeds);
+    ensure(config.num_seeds <= most_seeds, "num_seeds", || {
+        format!(
+            "must be at most {most_seeds} (the pixels of the image), got {}",
+            config.num_seeds
+        )
+    })?;
     let half = config.window / 2;
     if height < config.window || width < config.window {
         return Ok(StereoResult::empty(height, width));

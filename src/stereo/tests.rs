@@ -369,6 +369,13 @@ fn bad_input_is_refused_with_the_argument_named() {
         ),
         (
             StereoConfig {
+                num_seeds: 1 << 40,
+                ..Default::default()
+            },
+            "num_seeds",
+        ),
+        (
+            StereoConfig {
                 max_disparity: Some(20),
                 ..Default::default()
             },
