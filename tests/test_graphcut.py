@@ -244,6 +244,24 @@ def test_graph_bad_input():
     assert issubclass(InvalidInputError, ValueError)
 
 
+def test_integer_sums_that_could_pass_int64_are_refused():
+    # They used to wrap: three terminal edges of 2**62 each gave a flow of -2**62, and
+    # four unary costs of 2**62 an energy of 0.
+    big = 2**62
+    g = gc.Graph(3, dtype=np.int64)
+    g.add_terminal_edges(np.array([0, 1]), np.full(2, big // 2), np.zeros(2, np.int64))
+    _raises("source_cap", g.add_terminal_edges, np.array([2]), np.array([big]), np.array([0]))
+    _raises("cap", g.add_edges, np.array([0]), np.array([1]), np.array([big]), np.array([0]))
+    _raises("delta_source", g.update_terminal_edges, np.array([2]), np.array([big]), np.array([0]))
+    g.add_terminal_edges(np.array([2]), np.array([0]), np.array([big // 2]))
+    g.add_edges(np.array([0]), np.array([2]), np.array([big // 4]), np.array([0]))
+    assert g.maxflow() == big // 4  # the refused additions left the graph unchanged
+    edges = np.array([[0, 1], [1, 2], [2, 3]])
+    for fn in (gc.alpha_expansion, gc.alpha_beta_swap):
+        _raises("unary", fn, np.full((4, 3), big, np.int64), edges, np.ones(3, np.int64))
+        _raises("unary", fn, np.zeros((4, 3), np.int64), edges, np.full(3, big, np.int64))
+
+
 def test_crf_bad_input():
     unary = np.zeros((3, 2))
     edges = np.array([[0, 1], [1, 2]])

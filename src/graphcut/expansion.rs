@@ -256,6 +256,19 @@ fn check_problem<'a, C: Cost>(
         }
     }
     let big = if plain {
+        // Integer costs: every energy, and every move graph's flow (a few such terms
+        // per node and edge), must fit, or the sums would wrap around silently.
+        if C::EXACT {
+            energy_bound(p.unary, l, p.weights, &v)
+                .and_then(|t| t.checked_mul(C::from_i32(4)))
+                .ok_or_else(|| {
+                    Error::invalid(
+                        "unary",
+                        "integer costs too large: the energies could overflow int64; use \
+                         smaller units or float costs",
+                    )
+                })?;
+        }
         C::ZERO
     } else {
         forbidden_stand_in(p.unary, l, p.weights, &v)?
@@ -320,13 +333,9 @@ fn check_pairwise<C: Cost>(v: &[C], l: usize, need_metric: bool) -> Result<()> {
     Ok(())
 }
 
-/// A cost larger than the energy of any labelling without forbidden labels, so that a
-/// forbidden assignment inside a move graph always loses. Zero if nothing is forbidden.
-fn forbidden_stand_in<C: Cost>(unary: &[C], l: usize, weights: &[C], v: &[C]) -> Result<C> {
-    if !unary.contains(&C::FORBIDDEN) {
-        return Ok(C::ZERO);
-    }
-    let too_large = || Error::invalid("unary", "costs too large to forbid labels safely");
+/// 1 + the largest |energy| of any labelling without forbidden labels (Σ of each node's
+/// largest allowed |unary| + Σ weight × the largest V), `None` on overflow.
+fn energy_bound<C: Cost>(unary: &[C], l: usize, weights: &[C], v: &[C]) -> Option<C> {
     let mut vmax = C::ZERO;
     for &x in v {
         if x > vmax {
@@ -338,19 +347,33 @@ fn forbidden_stand_in<C: Cost>(unary: &[C], l: usize, weights: &[C], v: &[C]) ->
         let mut m = C::ZERO;
         for &u in row {
             if u != C::FORBIDDEN {
-                let a = if u < C::ZERO { -u } else { u };
+                // checked: −i64::MIN does not exist
+                let a = if u < C::ZERO {
+                    u.checked_mul(C::from_i32(-1))?
+                } else {
+                    u
+                };
                 if a > m {
                     m = a;
                 }
             }
         }
-        total = total.checked_add(m).ok_or_else(too_large)?;
+        total = total.checked_add(m)?;
     }
     for &w in weights {
-        total = total
-            .checked_add(w.mul(vmax).ok_or_else(too_large)?)
-            .ok_or_else(too_large)?;
+        total = total.checked_add(w.mul(vmax)?)?;
     }
+    Some(total)
+}
+
+/// A cost larger than the energy of any labelling without forbidden labels, so that a
+/// forbidden assignment inside a move graph always loses. Zero if nothing is forbidden.
+fn forbidden_stand_in<C: Cost>(unary: &[C], l: usize, weights: &[C], v: &[C]) -> Result<C> {
+    if !unary.contains(&C::FORBIDDEN) {
+        return Ok(C::ZERO);
+    }
+    let too_large = || Error::invalid("unary", "costs too large to forbid labels safely");
+    let total = energy_bound(unary, l, weights, v).ok_or_else(too_large)?;
     // Move graphs add up to a few such terms per node; keep head-room against overflow.
     let n = unary.len() / l;
     total
@@ -1293,6 +1316,44 @@ mod tests {
         };
         let err = alpha_expansion(&all_forbidden.view(None), None, &MoveConfig::default());
         assert!(matches!(err, Err(Error::InvalidArgument { name, .. }) if name == "unary"));
+    }
+
+    /// Integer costs whose energies could pass int64 are refused (they used to wrap:
+    /// four nodes at 2⁶² each reported energy 0); the largest safe ones still solve.
+    #[test]
+    fn integer_costs_that_could_overflow_are_refused() {
+        let big = 1i64 << 62;
+        let edges = vec![[0, 1], [1, 2], [2, 3]];
+        for (unary, weights) in [
+            (vec![big; 12], vec![1; 3]),
+            (vec![0; 12], vec![big; 3]),
+            (vec![i64::MIN, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0], vec![1; 3]),
+        ] {
+            let p = Prob {
+                l: 3,
+                unary,
+                edges: edges.clone(),
+                weights,
+            };
+            for r in [
+                alpha_expansion(&p.view(None), None, &MoveConfig::default()).err(),
+                alpha_beta_swap(&p.view(None), None, &MoveConfig::default()).err(),
+            ] {
+                assert!(
+                    matches!(r, Some(Error::InvalidArgument { ref name, .. }) if name == "unary")
+                );
+            }
+        }
+        // 4 × (1 + 4 × max|u| + Σ w) just fits.
+        let u = (i64::MAX / 4 - 10) / 4;
+        let p = Prob {
+            l: 3,
+            unary: (0..12).map(|k| if k % 3 == 0 { u } else { 0 }).collect(),
+            edges,
+            weights: vec![1; 3],
+        };
+        let r = alpha_expansion(&p.view(None), None, &MoveConfig::default()).unwrap();
+        assert_eq!(r.energy, 0);
     }
 
     #[test]

@@ -46,6 +46,9 @@ pub trait Capacity:
 {
     /// Zero.
     const ZERO: Self;
+    /// Integers: sums are exact but wrap past the type's range, so callers bound them
+    /// (floats round instead, and overflow only to a non-finite value).
+    const EXACT: bool;
     /// True for a usable capacity or cost: finite (floats) and not NaN.
     fn is_finite_value(self) -> bool;
     /// Lossy conversion for reporting.
@@ -69,6 +72,7 @@ pub trait Capacity:
 
 impl Capacity for f64 {
     const ZERO: Self = 0.0;
+    const EXACT: bool = false;
     #[inline(always)]
     fn is_finite_value(self) -> bool {
         self.is_finite()
@@ -91,6 +95,7 @@ impl Capacity for f64 {
 
 impl Capacity for i64 {
     const ZERO: Self = 0;
+    const EXACT: bool = true;
     #[inline(always)]
     fn is_finite_value(self) -> bool {
         true

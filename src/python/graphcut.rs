@@ -108,6 +108,34 @@ fn i64_caps(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<i64>> {
 #[pyclass(name = "MaxflowGraph", module = "depthpose._core")]
 pub struct PyGraph {
     inner: Inner,
+    /// Integer graphs: the sum of every capacity added and of every |change| so far. It
+    /// bounds every flow, residual and terminal sum the solver forms, so keeping it
+    /// within int64 rules out a silent wrap-around of the flow.
+    int_total: i128,
+}
+
+impl PyGraph {
+    /// `int_total` after adding `parts`, refused (naming `name`) beyond int64.
+    fn charged(&self, name: &str, parts: &[&[i64]]) -> PyResult<i128> {
+        let add: i128 = parts
+            .iter()
+            .flat_map(|p| p.iter())
+            .map(|&v| (v as i128).abs())
+            .sum();
+        let total = self.int_total + add;
+        if total > i64::MAX as i128 {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "integer capacities would add up to {total}, beyond int64 ({}), so the \
+                     flow could overflow; use smaller units or float capacities",
+                    i64::MAX
+                ),
+            )
+            .into());
+        }
+        Ok(total)
+    }
 }
 
 #[pymethods]
@@ -141,7 +169,10 @@ impl PyGraph {
         } else {
             Inner::F(Graph::try_with_capacity(n, hint)?)
         };
-        Ok(PyGraph { inner })
+        Ok(PyGraph {
+            inner,
+            int_total: 0,
+        })
     }
 
     /// Number of nodes.
@@ -193,9 +224,14 @@ impl PyGraph {
                 let (c, r) = (f64_caps(cap, "cap")?, f64_caps(rev_cap, "rev_cap")?);
                 py.detach(|| g.add_edges(&s, &d, &c, &r))?;
             }
-            Inner::I(g) => {
+            Inner::I(_) => {
                 let (c, r) = (i64_caps(cap, "cap")?, i64_caps(rev_cap, "rev_cap")?);
+                let total = self.charged("cap", &[&c, &r])?;
+                let Inner::I(g) = &mut self.inner else {
+                    unreachable!()
+                };
                 py.detach(|| g.add_edges(&s, &d, &c, &r))?;
+                self.int_total = total;
             }
         }
         Ok(())
@@ -217,12 +253,17 @@ impl PyGraph {
                 );
                 g.add_tweights_batch(&idx, &s, &t)?;
             }
-            Inner::I(g) => {
+            Inner::I(_) => {
                 let (s, t) = (
                     i64_caps(source_cap, "source_cap")?,
                     i64_caps(sink_cap, "sink_cap")?,
                 );
+                let total = self.charged("source_cap", &[&s, &t])?;
+                let Inner::I(g) = &mut self.inner else {
+                    unreachable!()
+                };
                 g.add_tweights_batch(&idx, &s, &t)?;
+                self.int_total = total;
             }
         }
         Ok(())
@@ -238,6 +279,15 @@ impl PyGraph {
     ) -> PyResult<()> {
         let idx = node_indices(nodes, "nodes", self.n_nodes())?;
         let m = idx.len();
+        if matches!(self.inner, Inner::I(_)) {
+            // Charged before applying: a change that fails half-way has still been
+            // partly applied, so the bound stays an upper one.
+            let (s, t) = (
+                i64_caps(delta_source, "delta_source")?,
+                i64_caps(delta_sink, "delta_sink")?,
+            );
+            self.int_total = self.charged("delta_source", &[&s, &t])?;
+        }
         macro_rules! apply {
             ($g:expr, $conv:expr) => {{
                 let s = $conv(delta_source, "delta_source")?;
