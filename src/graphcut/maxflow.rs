@@ -345,6 +345,10 @@ impl ActiveQueue {
 /// keep it in a small overflow table. Nodes are 20-byte records (terminal residual,
 /// parent word with the tree bit, packed time stamp and distance, first arc), plus one
 /// record that ends the last node's arcs.
+///
+/// Integer capacities: the caller keeps the sum of every capacity added (and every
+/// |change|) within the type's range; it bounds every flow and residual sum formed, and
+/// beyond it they would wrap (the Python binding enforces this; `docs/graphcut.md`).
 #[derive(Clone, Debug)]
 pub struct Graph<C: Capacity> {
     n: usize,
