@@ -1,10 +1,10 @@
-//! Run-time choice of the vector kernels outside the body model (the template matching's
-//! cost matrices and the assignment's row relaxation).
+//! Run-time choice of the AVX-512 kernels: the body model's distance stream, the template
+//! matching's cost matrices and the assignment's row relaxation.
 
 /// Whether the AVX-512 kernels may run: the CPU has AVX-512F and the environment
-/// variable `DEPTHPOSE_NO_AVX512` is not set (it also selects the body model's AVX2
-/// stream, see `body::ellipsoid`), so that tests and benchmarks can take the AVX2 path
-/// on an AVX-512 machine. Decided once per process.
+/// variable `DEPTHPOSE_NO_AVX512` is not set, so that tests and benchmarks can take the
+/// AVX2 paths on an AVX-512 machine. Decided once per process; the one place that reads
+/// the variable.
 #[inline]
 pub(crate) fn avx512() -> bool {
     use std::sync::OnceLock;

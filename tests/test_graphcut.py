@@ -239,6 +239,8 @@ def test_graph_bad_input():
     _raises("dtype", gc.Graph, 3, dtype=str)
     _raises("connectivity", gc.grid_edges, 3, 3, connectivity=6)
     _raises("h", gc.grid_edges, 0, 3)
+    _raises("w", gc.grid_edges, 3, 2**70)  # was truncated to 64 bits
+    _raises("connectivity", gc.grid_edges, 3, 3, connectivity=2**64 + 4)
     _raises("threads", gc.Graph(4).maxflow, threads=0)
     assert issubclass(InvalidInputError, DepthPoseError)
     assert issubclass(InvalidInputError, ValueError)
@@ -256,6 +258,15 @@ def test_integer_sums_that_could_pass_int64_are_refused():
     g.add_terminal_edges(np.array([2]), np.array([0]), np.array([big // 2]))
     g.add_edges(np.array([0]), np.array([2]), np.array([big // 4]), np.array([0]))
     assert g.maxflow() == big // 4  # the refused additions left the graph unchanged
+    # A batch of changes is all or nothing: the first fits, the second does not.
+    _raises(
+        "delta_source",
+        g.update_terminal_edges,
+        np.array([2, 2]),
+        np.array([1, big]),
+        np.zeros(2, np.int64),
+    )
+    assert g.maxflow() == big // 4
     edges = np.array([[0, 1], [1, 2], [2, 3]])
     for fn in (gc.alpha_expansion, gc.alpha_beta_swap):
         _raises("unary", fn, np.full((4, 3), big, np.int64), edges, np.ones(3, np.int64))

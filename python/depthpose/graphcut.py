@@ -68,7 +68,9 @@ class Graph:
         self, nodes: np.ndarray, delta_source: np.ndarray, delta_sink: np.ndarray
     ) -> None:
         """Changes terminal capacities by deltas (may be negative), also after a solve;
-        the next :meth:`maxflow` reuses the previous search trees (dynamic cuts)."""
+        the next :meth:`maxflow` reuses the previous search trees (dynamic cuts). All or
+        nothing: a refused batch (bad index, non-finite delta, an int graph's capacities
+        summing past int64) changes no capacity."""
         self._g.update_terminal_edges(_c(nodes), _c(delta_source), _c(delta_sink))
 
     def finalize(self) -> None:

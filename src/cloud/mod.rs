@@ -617,6 +617,14 @@ impl Connectivity {
             )),
         }
     }
+
+    /// The number of neighbours of a pixel: 4 or 8 (the inverse of [`Connectivity::from_int`]).
+    pub fn neighbours(self) -> u32 {
+        match self {
+            Connectivity::Four => 4,
+            Connectivity::Eight => 8,
+        }
+    }
 }
 
 /// The undirected graph between neighbouring points of a cloud.

@@ -49,6 +49,8 @@ pub trait Capacity:
     /// Integers: sums are exact but wrap past the type's range, so callers bound them
     /// (floats round instead, and overflow only to a non-finite value).
     const EXACT: bool;
+    /// Exact types: the largest sum of magnitudes a graph may hold (the type's maximum).
+    const EXACT_LIMIT: u128;
     /// True for a usable capacity or cost: finite (floats) and not NaN.
     fn is_finite_value(self) -> bool;
     /// Lossy conversion for reporting.
@@ -59,6 +61,8 @@ pub trait Capacity:
     fn checked_add(self, other: Self) -> Option<Self>;
     /// Multiplication that reports overflow (integers) or a non-finite result (floats).
     fn checked_mul(self, other: Self) -> Option<Self>;
+    /// |self| as a wide integer for the overflow budget of exact types (0 for floats).
+    fn exact_magnitude(self) -> u128;
     /// The smaller of two values.
     #[inline(always)]
     fn min_of(self, other: Self) -> Self {
@@ -73,6 +77,7 @@ pub trait Capacity:
 impl Capacity for f64 {
     const ZERO: Self = 0.0;
     const EXACT: bool = false;
+    const EXACT_LIMIT: u128 = u128::MAX;
     #[inline(always)]
     fn is_finite_value(self) -> bool {
         self.is_finite()
@@ -91,11 +96,15 @@ impl Capacity for f64 {
         let s = self * other;
         s.is_finite().then_some(s)
     }
+    fn exact_magnitude(self) -> u128 {
+        0
+    }
 }
 
 impl Capacity for i64 {
     const ZERO: Self = 0;
     const EXACT: bool = true;
+    const EXACT_LIMIT: u128 = i64::MAX as u128;
     #[inline(always)]
     fn is_finite_value(self) -> bool {
         true
@@ -111,6 +120,9 @@ impl Capacity for i64 {
     }
     fn checked_mul(self, other: Self) -> Option<Self> {
         i64::checked_mul(self, other)
+    }
+    fn exact_magnitude(self) -> u128 {
+        self.unsigned_abs() as u128
     }
 }
 
@@ -337,6 +349,12 @@ impl ActiveQueue {
 /// [`Graph::set_tweights`]) and `maxflow` called again: it reuses the residual graph
 /// and the search trees.
 ///
+/// Integer capacities (`Graph<i64>`) are exact: the graph keeps the sum of the
+/// magnitudes of every capacity and every change given to it since the last
+/// [`Graph::reset`], and refuses (with an error naming the argument, changing nothing) a
+/// call that would take that sum past `i64::MAX`. Every residual, excess and flow value
+/// the solver forms is bounded by that sum, so nothing can wrap.
+///
 /// Layout (per node 20 bytes plus 12 per arc for 8-byte capacities, see
 /// [`Graph::memory_bytes`]): arcs are grouped by tail (CSR), each a 12-byte record of a
 /// packed head word (`u32`: head node in the low 28 bits, sister hint in the top 4) and
@@ -370,6 +388,11 @@ pub struct Graph<C: Capacity> {
     changed_bits: BitSet,
     /// Accumulated terminal capacities per node, kept only for `set_tweights`.
     terminal_caps: Option<Vec<[C; 2]>>,
+    /// Exact (integer) types: the sum of the magnitudes of every capacity and every
+    /// change given to the public methods since the last [`Graph::reset`]. Every
+    /// residual, node excess and the flow stay within it, so keeping it within the
+    /// type's range rules out wrapping. Unused (0) for floats.
+    exact_total: u128,
     flow: C,
     time: u32,
     /// The clock restarts after this many ticks (`MAX_TIME` outside tests).
@@ -442,6 +465,7 @@ impl<C: Capacity> Graph<C> {
             changed: Vec::new(),
             changed_bits: BitSet::new(n_nodes),
             terminal_caps: None,
+            exact_total: 0,
             flow: C::ZERO,
             time: 0,
             max_time: MAX_TIME,
@@ -534,6 +558,30 @@ impl<C: Capacity> Graph<C> {
         }
     }
 
+    /// Exact types: `exact_total` after adding the magnitudes of `values`, refused
+    /// (naming `name`) beyond the type's range. Callers validate everything else first
+    /// and store the result only when they go ahead, so a refused call changes nothing.
+    fn charged(&self, name: &str, values: impl Iterator<Item = C>) -> Result<u128> {
+        if !C::EXACT {
+            return Ok(0);
+        }
+        let total = values.fold(self.exact_total, |t, v| {
+            t.saturating_add(v.exact_magnitude())
+        });
+        if total > C::EXACT_LIMIT {
+            return Err(Error::invalid(
+                name,
+                format!(
+                    "integer capacities would add up to {total}, beyond {} (the largest \
+                     value of the capacity type), so the flow could overflow; use smaller \
+                     units or float capacities",
+                    C::EXACT_LIMIT
+                ),
+            ));
+        }
+        Ok(total)
+    }
+
     /// Adds an edge with capacity `cap` from `i` to `j` and `rev_cap` from `j` to `i`.
     /// Parallel edges add up; self-loops are ignored. Returns the edge's index.
     pub fn add_edge(&mut self, i: usize, j: usize, cap: C, rev_cap: C) -> Result<usize> {
@@ -547,6 +595,7 @@ impl<C: Capacity> Graph<C> {
                 "too many edges for u32 arc indices",
             ));
         }
+        self.exact_total = self.charged("cap", [cap, rev_cap].into_iter())?;
         self.pending.push((i as u32, j as u32, cap, rev_cap));
         Ok(self.n_edges() - 1)
     }
@@ -595,6 +644,7 @@ impl<C: Capacity> Graph<C> {
         if self.n_edges() + m > MAX_ARCS / 2 {
             return Err(Error::invalid("src", "too many edges for u32 arc indices"));
         }
+        self.exact_total = self.charged("cap", cap.iter().chain(rev_cap).copied())?;
         if self.n_edges() == 0 && !self.trees_valid {
             self.pending = Vec::new();
             self.build_from(m, |k| (src[k], dst[k], cap[k], rev_cap[k]));
@@ -613,6 +663,7 @@ impl<C: Capacity> Graph<C> {
         self.check_node(i, "i")?;
         Self::check_cap(source_cap, "source_cap")?;
         Self::check_cap(sink_cap, "sink_cap")?;
+        self.exact_total = self.charged("source_cap", [source_cap, sink_cap].into_iter())?;
         self.update_tweights_unchecked(i, source_cap, sink_cap);
         Ok(())
     }
@@ -659,6 +710,8 @@ impl<C: Capacity> Graph<C> {
                 ));
             }
         }
+        self.exact_total =
+            self.charged("source_cap", source_cap.iter().chain(sink_cap).copied())?;
         for k in 0..m {
             self.update_tweights_unchecked(nodes[k] as usize, source_cap[k], sink_cap[k]);
         }
@@ -685,7 +738,74 @@ impl<C: Capacity> Graph<C> {
                 ));
             }
         }
+        self.exact_total = self.charged("delta_source", [delta_source, delta_sink].into_iter())?;
         self.update_tweights_unchecked(i, delta_source, delta_sink);
+        Ok(())
+    }
+
+    /// [`Graph::update_tweights`] for many nodes (arrays of one length; a node may
+    /// appear more than once, its changes add up). All or nothing: every change is
+    /// checked before any is applied.
+    pub fn update_tweights_batch(
+        &mut self,
+        nodes: &[u32],
+        delta_source: &[C],
+        delta_sink: &[C],
+    ) -> Result<()> {
+        let m = nodes.len();
+        for (name, len) in [
+            ("delta_source", delta_source.len()),
+            ("delta_sink", delta_sink.len()),
+        ] {
+            if len != m {
+                return Err(Error::invalid(
+                    name,
+                    format!("length {len} does not match nodes length {m}"),
+                ));
+            }
+        }
+        if let Some(k) = nodes.iter().position(|&v| v as usize >= self.n) {
+            return Err(Error::invalid(
+                "nodes",
+                format!(
+                    "node index {} at position {k} out of range for {} nodes",
+                    nodes[k], self.n
+                ),
+            ));
+        }
+        for (name, d) in [("delta_source", delta_source), ("delta_sink", delta_sink)] {
+            if let Some(k) = d.iter().position(|v| !v.is_finite_value()) {
+                return Err(Error::invalid(
+                    name,
+                    format!("must be finite, got {:?} at position {k}", d[k]),
+                ));
+            }
+        }
+        if let Some(t) = &self.terminal_caps {
+            // Running capacities of the nodes named, so repeated nodes are checked on
+            // their sum.
+            let mut after: std::collections::HashMap<u32, [C; 2]> = Default::default();
+            for k in 0..m {
+                let caps = after.entry(nodes[k]).or_insert(t[nodes[k] as usize]);
+                caps[0] += delta_source[k];
+                caps[1] += delta_sink[k];
+                if caps[0] < C::ZERO || caps[1] < C::ZERO {
+                    return Err(Error::invalid(
+                        "delta_source",
+                        format!(
+                            "the change at position {k} would make a terminal capacity negative"
+                        ),
+                    ));
+                }
+            }
+        }
+        self.exact_total = self.charged(
+            "delta_source",
+            delta_source.iter().chain(delta_sink).copied(),
+        )?;
+        for k in 0..m {
+            self.update_tweights_unchecked(nodes[k] as usize, delta_source[k], delta_sink[k]);
+        }
         Ok(())
     }
 
@@ -701,7 +821,10 @@ impl<C: Capacity> Graph<C> {
             ));
         };
         let [s, k] = t[i];
-        self.update_tweights_unchecked(i, source_cap - s, sink_cap - k);
+        // Both sides are ≥ 0, so the differences cannot overflow.
+        let (ds, dk) = (source_cap - s, sink_cap - k);
+        self.exact_total = self.charged("source_cap", [ds, dk].into_iter())?;
+        self.update_tweights_unchecked(i, ds, dk);
         Ok(())
     }
 
@@ -876,6 +999,7 @@ impl<C: Capacity> Graph<C> {
         if let Some(t) = &mut self.terminal_caps {
             t.fill([C::ZERO; 2]);
         }
+        self.exact_total = 0;
         // Search states of earlier solves stay where they were, at nodes no later
         // `reset_touched` list needs to name.
         self.bounded = self.clean;
@@ -966,6 +1090,7 @@ impl<C: Capacity> Graph<C> {
         }
         Self::check_cap(cap, "cap")?;
         Self::check_cap(rev_cap, "rev_cap")?;
+        self.exact_total = self.charged("cap", [cap, rev_cap].into_iter())?;
         self.set_edge_caps_unchecked(k, cap, rev_cap);
         Ok(())
     }
@@ -2429,6 +2554,77 @@ mod tests {
         assert!(g.add_edges(&[0], &[1, 0], &[1.0], &[1.0]).is_err());
         assert!(g.set_tweights(0, 1.0, 1.0).is_err()); // not tracked
         assert!(grid_edges(2, 2, 6).is_err());
+    }
+
+    /// Integer capacities whose sum could pass `i64::MAX` are refused by every entry
+    /// point, naming the argument and changing nothing (they used to wrap: three
+    /// terminal arcs of 2^62 gave a flow of −2^62).
+    #[test]
+    fn integer_sums_past_int64_are_refused_and_change_nothing() {
+        let big = 1i64 << 62;
+        let name_of = |r: Result<()>| match r {
+            Err(Error::InvalidArgument { name, .. }) => name,
+            other => panic!("expected a refusal, got {other:?}"),
+        };
+        let mut g = Graph::<i64>::new(3);
+        g.track_terminal_caps();
+        g.keep_edge_index();
+        g.add_tweights_batch(&[0, 1], &[big / 2, big / 2], &[0, 0])
+            .unwrap();
+        assert_eq!(name_of(g.add_tweights(2, big, 0)), "source_cap");
+        assert_eq!(
+            name_of(g.add_tweights_batch(&[2], &[0], &[big])),
+            "source_cap"
+        );
+        assert_eq!(name_of(g.add_edge(0, 1, big, 0).map(|_| ())), "cap");
+        assert_eq!(name_of(g.add_edges(&[0], &[2], &[0], &[big])), "cap");
+        assert_eq!(name_of(g.update_tweights(2, big, 0)), "delta_source");
+        // All or nothing: the first change fits, the second would not.
+        assert_eq!(
+            name_of(g.update_tweights_batch(&[2, 2], &[1, big], &[0, 0])),
+            "delta_source"
+        );
+        assert_eq!(name_of(g.set_tweights(2, 0, big)), "source_cap");
+        g.add_tweights(2, 0, big / 2).unwrap();
+        g.add_edge(0, 2, big / 4, 0).unwrap();
+        // Negative deltas count by their magnitude too (the sum is now 1.75 · 2^62):
+        // the budget bounds every intermediate value, not only the final capacities.
+        assert_eq!(name_of(g.update_tweights(0, -(big / 2), 0)), "delta_source");
+        assert_eq!(g.maxflow(), big / 4); // the refused calls left the graph unchanged
+                                          // Edge capacities set after a reset are charged from zero again.
+        g.reset();
+        assert_eq!(name_of(g.set_edge_caps(0, big, big)), "cap");
+        g.set_edge_caps(0, big / 2, 0).unwrap();
+        g.add_tweights(0, big / 4, 0).unwrap();
+        g.add_tweights(2, 0, big / 8).unwrap();
+        assert_eq!(g.maxflow(), big / 8);
+        // Floats have no such budget (they round, and overflow only to infinity).
+        let mut f = Graph::<f64>::new(2);
+        for _ in 0..4 {
+            f.add_tweights(0, 4.0e18, 0.0).unwrap();
+        }
+    }
+
+    #[test]
+    fn terminal_changes_in_a_batch_are_checked_on_their_sum() {
+        let mut g = Graph::<i64>::new(2);
+        g.track_terminal_caps();
+        g.add_tweights(0, 3, 0).unwrap();
+        g.add_edge(0, 1, 5, 0).unwrap();
+        g.add_tweights(1, 0, 4).unwrap();
+        // Each change alone keeps node 0's source capacity ≥ 0; together they do not.
+        assert!(g
+            .update_tweights_batch(&[0, 0], &[-2, -2], &[0, 0])
+            .is_err());
+        assert!(g.update_tweights_batch(&[0], &[1], &[0, 0]).is_err()); // lengths
+        assert!(g.update_tweights_batch(&[2], &[1], &[0]).is_err()); // node index
+        assert_eq!(g.maxflow(), 3); // unchanged by the refused batches
+        g.update_tweights_batch(&[0, 0, 1], &[-1, 2], &[0, 0])
+            .unwrap_err(); // lengths again (3 nodes, 2 deltas)
+        g.update_tweights_batch(&[0, 0], &[-1, 2], &[0, 0]).unwrap();
+        assert_eq!(g.maxflow(), 4); // source capacity 4, sink capacity 4
+        let mut f = Graph::<f64>::new(1);
+        assert!(f.update_tweights_batch(&[0], &[f64::NAN], &[0.0]).is_err());
     }
 
     /// Bytes per node of a solved 4-connected `h`×`w` grid graph with capacities `C`,

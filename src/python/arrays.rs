@@ -26,6 +26,22 @@ pub fn count(value: i128, name: &str) -> PyResult<usize> {
         .map_err(|_| err(name, format!("must be a non-negative integer, got {value}")))
 }
 
+/// [`count`] for an argument that must also be at least `min` (a size, a number of
+/// rounds).
+pub fn count_at_least(value: i128, min: usize, name: &str) -> PyResult<usize> {
+    usize::try_from(value)
+        .ok()
+        .filter(|&v| v >= min)
+        .ok_or_else(|| err(name, format!("must be an integer >= {min}, got {value}")))
+}
+
+/// A pixel connectivity argument: 4 or 8.
+pub fn connectivity(value: i128) -> PyResult<crate::cloud::Connectivity> {
+    let n = u32::try_from(value).unwrap_or(0);
+    crate::cloud::Connectivity::from_int(n)
+        .map_err(|_| err("connectivity", format!("must be 4 or 8, got {value}")))
+}
+
 /// [`count`] for an optional argument.
 pub fn count_opt(value: Option<i128>, name: &str) -> PyResult<Option<usize>> {
     value.map(|v| count(v, name)).transpose()

@@ -490,13 +490,7 @@ impl PyBodyModel {
                 )
             }
         };
-        let count = |v: i128, name: &str| -> PyResult<usize> {
-            if let Some(v) = usize::try_from(v).ok().filter(|&v| v >= 1) {
-                Ok(v)
-            } else {
-                Err(Error::invalid(name, format!("must be >= 1, got {v}")).into())
-            }
-        };
+        let count = |v: i128, name: &str| super::arrays::count_at_least(v, 1, name);
         let cfg = ShapeConfig {
             fit: match config {
                 Some(c) => c.to_rust()?,

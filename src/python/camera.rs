@@ -14,15 +14,7 @@ impl PyCamera {
     #[new]
     #[pyo3(signature = (fx, fy, cx, cy, width, height))]
     fn new(fx: f64, fy: f64, cx: f64, cy: f64, width: i128, height: i128) -> PyResult<Self> {
-        let size = |v: i128, n: &str| -> PyResult<usize> {
-            if v <= 0 {
-                Err(crate::Error::invalid(n, format!("must be positive, got {v}")).into())
-            } else {
-                usize::try_from(v).map_err(|_| {
-                    crate::Error::invalid(n, format!("is unreasonably large: {v}")).into()
-                })
-            }
-        };
+        let size = |v: i128, n: &str| super::arrays::count_at_least(v, 1, n);
         Ok(PyCamera {
             inner: Camera::new(
                 fx,

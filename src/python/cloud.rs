@@ -3,8 +3,8 @@
 use super::arrays::{bool_array, count, depth_array, to_numpy};
 use super::camera::PyCamera;
 use crate::cloud::{
-    foreground_mask as fg_mask, neighbour_graph, normals_from_depth, Cloud, Connectivity,
-    DepthView, ForegroundConfig, NormalConfig,
+    foreground_mask as fg_mask, neighbour_graph, normals_from_depth, Cloud, DepthView,
+    ForegroundConfig, NormalConfig,
 };
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -98,17 +98,7 @@ fn pixel_graph<'py>(
 ) -> PyResult<(I32Array<'py>, F32Array<'py>, F32Array<'py>)> {
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
-    let conn = match connectivity {
-        4 => Connectivity::Four,
-        8 => Connectivity::Eight,
-        _ => {
-            return Err(crate::Error::invalid(
-                "connectivity",
-                format!("must be 4 or 8, got {connectivity}"),
-            )
-            .into())
-        }
-    };
+    let conn = super::arrays::connectivity(connectivity)?;
     let g = py.detach(|| -> PyResult<_> {
         let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
         Ok(neighbour_graph(&cloud, conn))

@@ -151,12 +151,7 @@ impl PyFitConfig {
     ) -> PyResult<Self> {
         let d = EmConfig::default();
         let count = |v: Option<i128>, default: usize, name: &str| -> PyResult<usize> {
-            match v {
-                None => Ok(default),
-                Some(v) => usize::try_from(v).map_err(|_| {
-                    Error::invalid(name, format!("must be an integer >= 0, got {v}")).into()
-                }),
-            }
+            Ok(super::arrays::count_opt(v, name)?.unwrap_or(default))
         };
         let cfg = PyFitConfig {
             sigma: sigma.unwrap_or(d.sigma),
@@ -177,16 +172,7 @@ impl PyFitConfig {
             free_space_margin: free_space_margin.unwrap_or(d.free_space_margin),
             free_space_truncation: free_space_truncation.unwrap_or(d.free_space_truncation),
             lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
-            connectivity: match connectivity {
-                4 | 8 => connectivity as u32,
-                _ => {
-                    return Err(Error::invalid(
-                        "connectivity",
-                        format!("must be 4 or 8, got {connectivity}"),
-                    )
-                    .into())
-                }
-            },
+            connectivity: super::arrays::connectivity(connectivity)?.neighbours(),
             stride: usize::try_from(stride)
                 .ok()
                 .filter(|s| (1..=MAX_STRIDE).contains(s))

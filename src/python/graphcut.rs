@@ -1,6 +1,6 @@
 //! Max-flow graphs and CRF move-making solvers for Python (`depthpose.graphcut`).
 
-use super::arrays::{f64_array, i64_array, to_numpy};
+use super::arrays::{count_at_least, f64_array, i64_array, to_numpy};
 use crate::graphcut::{
     alpha_beta_swap as swap_core, alpha_expansion as expansion_core, energy as energy_core,
     grid_edges as grid_edges_core, maxflow::MAX_NODES, Cost, CrfProblem, Graph, Labelling,
@@ -107,35 +107,8 @@ fn i64_caps(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<i64>> {
 /// A directed graph with source and sink for max-flow / min-cut (Boykov–Kolmogorov).
 #[pyclass(name = "MaxflowGraph", module = "depthpose._core")]
 pub struct PyGraph {
+    /// Integer graphs refuse capacities whose sum could pass int64 (the core keeps it).
     inner: Inner,
-    /// Integer graphs: the sum of every capacity added and of every |change| so far. It
-    /// bounds every flow, residual and terminal sum the solver forms, so keeping it
-    /// within int64 rules out a silent wrap-around of the flow.
-    int_total: i128,
-}
-
-impl PyGraph {
-    /// `int_total` after adding `parts`, refused (naming `name`) beyond int64.
-    fn charged(&self, name: &str, parts: &[&[i64]]) -> PyResult<i128> {
-        let add: i128 = parts
-            .iter()
-            .flat_map(|p| p.iter())
-            .map(|&v| (v as i128).abs())
-            .sum();
-        let total = self.int_total + add;
-        if total > i64::MAX as i128 {
-            return Err(Error::invalid(
-                name,
-                format!(
-                    "integer capacities would add up to {total}, beyond int64 ({}), so the \
-                     flow could overflow; use smaller units or float capacities",
-                    i64::MAX
-                ),
-            )
-            .into());
-        }
-        Ok(total)
-    }
 }
 
 #[pymethods]
@@ -169,10 +142,7 @@ impl PyGraph {
         } else {
             Inner::F(Graph::try_with_capacity(n, hint)?)
         };
-        Ok(PyGraph {
-            inner,
-            int_total: 0,
-        })
+        Ok(PyGraph { inner })
     }
 
     /// Number of nodes.
@@ -224,14 +194,9 @@ impl PyGraph {
                 let (c, r) = (f64_caps(cap, "cap")?, f64_caps(rev_cap, "rev_cap")?);
                 py.detach(|| g.add_edges(&s, &d, &c, &r))?;
             }
-            Inner::I(_) => {
+            Inner::I(g) => {
                 let (c, r) = (i64_caps(cap, "cap")?, i64_caps(rev_cap, "rev_cap")?);
-                let total = self.charged("cap", &[&c, &r])?;
-                let Inner::I(g) = &mut self.inner else {
-                    unreachable!()
-                };
                 py.detach(|| g.add_edges(&s, &d, &c, &r))?;
-                self.int_total = total;
             }
         }
         Ok(())
@@ -253,17 +218,12 @@ impl PyGraph {
                 );
                 g.add_tweights_batch(&idx, &s, &t)?;
             }
-            Inner::I(_) => {
+            Inner::I(g) => {
                 let (s, t) = (
                     i64_caps(source_cap, "source_cap")?,
                     i64_caps(sink_cap, "sink_cap")?,
                 );
-                let total = self.charged("source_cap", &[&s, &t])?;
-                let Inner::I(g) = &mut self.inner else {
-                    unreachable!()
-                };
                 g.add_tweights_batch(&idx, &s, &t)?;
-                self.int_total = total;
             }
         }
         Ok(())
@@ -278,39 +238,21 @@ impl PyGraph {
         delta_sink: &Bound<PyAny>,
     ) -> PyResult<()> {
         let idx = node_indices(nodes, "nodes", self.n_nodes())?;
-        let m = idx.len();
-        if matches!(self.inner, Inner::I(_)) {
-            // Charged before applying: a change that fails half-way has still been
-            // partly applied, so the bound stays an upper one.
-            let (s, t) = (
-                i64_caps(delta_source, "delta_source")?,
-                i64_caps(delta_sink, "delta_sink")?,
-            );
-            self.int_total = self.charged("delta_source", &[&s, &t])?;
-        }
-        macro_rules! apply {
-            ($g:expr, $conv:expr) => {{
-                let s = $conv(delta_source, "delta_source")?;
-                let t = $conv(delta_sink, "delta_sink")?;
-                for (name, len) in [("delta_source", s.len()), ("delta_sink", t.len())] {
-                    if len != m {
-                        return Err(Error::invalid(
-                            name,
-                            format!("length {len} does not match nodes length {m}"),
-                        )
-                        .into());
-                    }
-                }
-                for k in 0..m {
-                    $g.update_tweights(idx[k] as usize, s[k], t[k])?;
-                }
-            }};
-        }
         match &mut self.inner {
-            Inner::F(g) => apply!(g, f64_caps),
-            Inner::I(g) => apply!(g, |o: &Bound<PyAny>, n: &str| -> PyResult<Vec<i64>> {
-                i64_caps(o, n)
-            }),
+            Inner::F(g) => {
+                let (s, t) = (
+                    f64_caps(delta_source, "delta_source")?,
+                    f64_caps(delta_sink, "delta_sink")?,
+                );
+                g.update_tweights_batch(&idx, &s, &t)?;
+            }
+            Inner::I(g) => {
+                let (s, t) = (
+                    i64_caps(delta_source, "delta_source")?,
+                    i64_caps(delta_sink, "delta_sink")?,
+                );
+                g.update_tweights_batch(&idx, &s, &t)?;
+            }
         }
         Ok(())
     }
@@ -377,19 +319,10 @@ fn grid_edges<'py>(
     w: i128,
     connectivity: i128,
 ) -> PyResult<I64Array<'py>> {
-    for (name, v) in [("h", h), ("w", w)] {
-        if v <= 0 {
-            return Err(Error::invalid(name, format!("must be positive, got {v}")).into());
-        }
-    }
-    if connectivity != 4 && connectivity != 8 {
-        return Err(Error::invalid(
-            "connectivity",
-            format!("must be 4 or 8, got {connectivity}"),
-        )
-        .into());
-    }
-    let e = py.detach(|| grid_edges_core(h as usize, w as usize, connectivity as u8))?;
+    let h = count_at_least(h, 1, "h")?;
+    let w = count_at_least(w, 1, "w")?;
+    let connectivity = super::arrays::connectivity(connectivity)?.neighbours() as u8;
+    let e = py.detach(|| grid_edges_core(h, w, connectivity))?;
     let m = e.len();
     let flat: Vec<i64> = e.into_iter().flatten().map(i64::from).collect();
     Ok(to_numpy(py, flat, &[m, 2]))

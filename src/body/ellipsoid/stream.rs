@@ -51,7 +51,8 @@ pub fn kernel() -> Kernel {
     match DECIDED.load(Ordering::Relaxed) {
         0 => {
             let set = |name: &str| std::env::var_os(name).is_some();
-            let k = if cpu_has_avx512() && !set("DEPTHPOSE_NO_AVX512") {
+            // `cpu::avx512` also honours `DEPTHPOSE_NO_AVX512`; the stream needs BMI2 too.
+            let k = if crate::cpu::avx512() && cpu_has_bmi2() {
                 Kernel::Avx512
             } else if cpu_has_avx2() && !set("DEPTHPOSE_NO_STREAM") {
                 Kernel::Avx2
@@ -77,11 +78,10 @@ fn cpu_has_avx2() -> bool {
     }
 }
 
-fn cpu_has_avx512() -> bool {
+fn cpu_has_bmi2() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
-        std::arch::is_x86_feature_detected!("avx512f")
-            && std::arch::is_x86_feature_detected!("bmi2")
+        std::arch::is_x86_feature_detected!("bmi2")
     }
     #[cfg(not(target_arch = "x86_64"))]
     {
