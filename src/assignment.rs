@@ -147,6 +147,18 @@ fn relax_columns(
     (least, pick)
 }
 
+/// The vector kernels' final step: the least of the per-lane minima `lanes`, at its
+/// first column (`cols`, −1 where a lane saw none), as the portable scan would pick it.
+fn least_across_lanes(lanes: &[f64], cols: &[i64]) -> (f64, usize) {
+    let mut best = (f64::INFINITY, NONE);
+    for (&d, &j) in lanes.iter().zip(cols) {
+        if j >= 0 && (d < best.0 || (d == best.0 && (j as usize) < best.1)) {
+            best = (d, j as usize);
+        }
+    }
+    best
+}
+
 /// [`relax_row`] with AVX-512, eight columns at a time, the blends and the path
 /// writes under mask registers; the same arithmetic and the same result.
 #[cfg(target_arch = "x86_64")]
@@ -187,16 +199,10 @@ unsafe fn relax_row_avx512(
         at = _mm512_mask_blend_epi64(lower, at, index);
         index = _mm512_add_epi64(index, eight);
     }
-    // Across the lanes: the least value, at its first column.
     let (mut lanes, mut cols) = ([0.0f64; 8], [0i64; 8]);
     _mm512_storeu_pd(lanes.as_mut_ptr(), least);
     _mm512_storeu_epi64(cols.as_mut_ptr(), at);
-    let mut best = (f64::INFINITY, NONE);
-    for (&d, &j) in lanes.iter().zip(&cols) {
-        if j >= 0 && (d < best.0 || (d == best.0 && (j as usize) < best.1)) {
-            best = (d, j as usize);
-        }
-    }
+    let best = least_across_lanes(&lanes, &cols);
     relax_columns(row, v, base, i, shortest, path, full, best)
 }
 
@@ -242,16 +248,10 @@ unsafe fn relax_row_avx2(
         ));
         index = _mm256_add_epi64(index, four);
     }
-    // Across the lanes: the least value, at its first column.
     let (mut lanes, mut cols) = ([0.0f64; 4], [0i64; 4]);
     _mm256_storeu_pd(lanes.as_mut_ptr(), least);
     _mm256_storeu_si256(cols.as_mut_ptr() as *mut __m256i, at);
-    let mut best = (f64::INFINITY, NONE);
-    for (&d, &j) in lanes.iter().zip(&cols) {
-        if j >= 0 && (d < best.0 || (d == best.0 && (j as usize) < best.1)) {
-            best = (d, j as usize);
-        }
-    }
+    let best = least_across_lanes(&lanes, &cols);
     relax_columns(row, v, base, i, shortest, path, full, best)
 }
 

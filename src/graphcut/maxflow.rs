@@ -558,6 +558,55 @@ impl<C: Capacity> Graph<C> {
         }
     }
 
+    /// Batch arguments: every array in `others` has the length of `first` (named
+    /// `first_name`), every index array names nodes of the graph.
+    fn check_batch(
+        &self,
+        (first_name, first): (&str, &[u32]),
+        others: &[(&str, usize)],
+        more_indices: &[(&str, &[u32])],
+    ) -> Result<()> {
+        let m = first.len();
+        if let Some(&(name, len)) = others.iter().find(|&&(_, len)| len != m) {
+            return Err(Error::invalid(
+                name,
+                format!("length {len} does not match {first_name} length {m}"),
+            ));
+        }
+        for &(name, idx) in std::iter::once(&(first_name, first)).chain(more_indices) {
+            if let Some(k) = idx.iter().position(|&v| v as usize >= self.n) {
+                return Err(Error::invalid(
+                    name,
+                    format!(
+                        "node index {} at position {k} out of range for {} nodes",
+                        idx[k], self.n
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Batch values: finite everywhere, and non-negative if they are capacities (not
+    /// changes).
+    fn check_values(arrays: &[(&str, &[C])], capacities: bool) -> Result<()> {
+        for &(name, c) in arrays {
+            let bad = |v: &C| !v.is_finite_value() || capacities && *v < C::ZERO;
+            if let Some(k) = c.iter().position(bad) {
+                let what = if capacities {
+                    "capacities must be finite and non-negative"
+                } else {
+                    "must be finite"
+                };
+                return Err(Error::invalid(
+                    name,
+                    format!("{what}, got {:?} at position {k}", c[k]),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// Exact types: `exact_total` after adding the magnitudes of `values`, refused
     /// (naming `name`) beyond the type's range. Callers validate everything else first
     /// and store the result only when they go ahead, so a refused call changes nothing.
@@ -604,43 +653,16 @@ impl<C: Capacity> Graph<C> {
     /// On a graph without edges the arc arrays are built right away from the arrays.
     pub fn add_edges(&mut self, src: &[u32], dst: &[u32], cap: &[C], rev_cap: &[C]) -> Result<()> {
         let m = src.len();
-        for (name, len) in [
-            ("dst", dst.len()),
-            ("cap", cap.len()),
-            ("rev_cap", rev_cap.len()),
-        ] {
-            if len != m {
-                return Err(Error::invalid(
-                    name,
-                    format!("length {len} does not match src length {m}"),
-                ));
-            }
-        }
-        for (name, idx) in [("src", src), ("dst", dst)] {
-            if let Some(k) = idx.iter().position(|&v| v as usize >= self.n) {
-                return Err(Error::invalid(
-                    name,
-                    format!(
-                        "node index {} at position {k} out of range for {} nodes",
-                        idx[k], self.n
-                    ),
-                ));
-            }
-        }
-        for (name, c) in [("cap", cap), ("rev_cap", rev_cap)] {
-            if let Some(k) = c
-                .iter()
-                .position(|&v| !(v.is_finite_value() && v >= C::ZERO))
-            {
-                return Err(Error::invalid(
-                    name,
-                    format!(
-                        "capacities must be finite and non-negative, got {:?} at position {k}",
-                        c[k]
-                    ),
-                ));
-            }
-        }
+        self.check_batch(
+            ("src", src),
+            &[
+                ("dst", dst.len()),
+                ("cap", cap.len()),
+                ("rev_cap", rev_cap.len()),
+            ],
+            &[("dst", dst)],
+        )?;
+        Self::check_values(&[("cap", cap), ("rev_cap", rev_cap)], true)?;
         if self.n_edges() + m > MAX_ARCS / 2 {
             return Err(Error::invalid("src", "too many edges for u32 arc indices"));
         }
@@ -675,44 +697,18 @@ impl<C: Capacity> Graph<C> {
         source_cap: &[C],
         sink_cap: &[C],
     ) -> Result<()> {
-        let m = nodes.len();
-        for (name, len) in [
-            ("source_cap", source_cap.len()),
-            ("sink_cap", sink_cap.len()),
-        ] {
-            if len != m {
-                return Err(Error::invalid(
-                    name,
-                    format!("length {len} does not match nodes length {m}"),
-                ));
-            }
-        }
-        if let Some(k) = nodes.iter().position(|&v| v as usize >= self.n) {
-            return Err(Error::invalid(
-                "nodes",
-                format!(
-                    "node index {} at position {k} out of range for {} nodes",
-                    nodes[k], self.n
-                ),
-            ));
-        }
-        for (name, c) in [("source_cap", source_cap), ("sink_cap", sink_cap)] {
-            if let Some(k) = c
-                .iter()
-                .position(|&v| !(v.is_finite_value() && v >= C::ZERO))
-            {
-                return Err(Error::invalid(
-                    name,
-                    format!(
-                        "capacities must be finite and non-negative, got {:?} at position {k}",
-                        c[k]
-                    ),
-                ));
-            }
-        }
+        self.check_batch(
+            ("nodes", nodes),
+            &[
+                ("source_cap", source_cap.len()),
+                ("sink_cap", sink_cap.len()),
+            ],
+            &[],
+        )?;
+        Self::check_values(&[("source_cap", source_cap), ("sink_cap", sink_cap)], true)?;
         self.exact_total =
             self.charged("source_cap", source_cap.iter().chain(sink_cap).copied())?;
-        for k in 0..m {
+        for k in 0..nodes.len() {
             self.update_tweights_unchecked(nodes[k] as usize, source_cap[k], sink_cap[k]);
         }
         Ok(())
@@ -753,34 +749,18 @@ impl<C: Capacity> Graph<C> {
         delta_sink: &[C],
     ) -> Result<()> {
         let m = nodes.len();
-        for (name, len) in [
-            ("delta_source", delta_source.len()),
-            ("delta_sink", delta_sink.len()),
-        ] {
-            if len != m {
-                return Err(Error::invalid(
-                    name,
-                    format!("length {len} does not match nodes length {m}"),
-                ));
-            }
-        }
-        if let Some(k) = nodes.iter().position(|&v| v as usize >= self.n) {
-            return Err(Error::invalid(
-                "nodes",
-                format!(
-                    "node index {} at position {k} out of range for {} nodes",
-                    nodes[k], self.n
-                ),
-            ));
-        }
-        for (name, d) in [("delta_source", delta_source), ("delta_sink", delta_sink)] {
-            if let Some(k) = d.iter().position(|v| !v.is_finite_value()) {
-                return Err(Error::invalid(
-                    name,
-                    format!("must be finite, got {:?} at position {k}", d[k]),
-                ));
-            }
-        }
+        self.check_batch(
+            ("nodes", nodes),
+            &[
+                ("delta_source", delta_source.len()),
+                ("delta_sink", delta_sink.len()),
+            ],
+            &[],
+        )?;
+        Self::check_values(
+            &[("delta_source", delta_source), ("delta_sink", delta_sink)],
+            false,
+        )?;
         if let Some(t) = &self.terminal_caps {
             // Running capacities of the nodes named, so repeated nodes are checked on
             // their sum.

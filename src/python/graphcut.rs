@@ -111,6 +111,40 @@ pub struct PyGraph {
     inner: Inner,
 }
 
+impl PyGraph {
+    /// Terminal capacities of many nodes: added (`update` false: `source_cap`,
+    /// `sink_cap` ≥ 0) or changed by deltas (`update` true: `delta_source`, `delta_sink`).
+    fn terminal_batch(
+        &mut self,
+        nodes: &Bound<PyAny>,
+        source: &Bound<PyAny>,
+        sink: &Bound<PyAny>,
+        update: bool,
+    ) -> PyResult<()> {
+        let idx = node_indices(nodes, "nodes", self.n_nodes())?;
+        let names = if update {
+            ("delta_source", "delta_sink")
+        } else {
+            ("source_cap", "sink_cap")
+        };
+        macro_rules! apply {
+            ($g:expr, $caps:expr) => {{
+                let (s, t) = ($caps(source, names.0)?, $caps(sink, names.1)?);
+                if update {
+                    $g.update_tweights_batch(&idx, &s, &t)?
+                } else {
+                    $g.add_tweights_batch(&idx, &s, &t)?
+                }
+            }};
+        }
+        match &mut self.inner {
+            Inner::F(g) => apply!(g, f64_caps),
+            Inner::I(g) => apply!(g, i64_caps),
+        }
+        Ok(())
+    }
+}
+
 #[pymethods]
 impl PyGraph {
     #[new]
@@ -209,24 +243,7 @@ impl PyGraph {
         source_cap: &Bound<PyAny>,
         sink_cap: &Bound<PyAny>,
     ) -> PyResult<()> {
-        let idx = node_indices(nodes, "nodes", self.n_nodes())?;
-        match &mut self.inner {
-            Inner::F(g) => {
-                let (s, t) = (
-                    f64_caps(source_cap, "source_cap")?,
-                    f64_caps(sink_cap, "sink_cap")?,
-                );
-                g.add_tweights_batch(&idx, &s, &t)?;
-            }
-            Inner::I(g) => {
-                let (s, t) = (
-                    i64_caps(source_cap, "source_cap")?,
-                    i64_caps(sink_cap, "sink_cap")?,
-                );
-                g.add_tweights_batch(&idx, &s, &t)?;
-            }
-        }
-        Ok(())
+        self.terminal_batch(nodes, source_cap, sink_cap, false)
     }
 
     /// Changes terminal capacities by (possibly negative) deltas, also after a solve;
@@ -237,24 +254,7 @@ impl PyGraph {
         delta_source: &Bound<PyAny>,
         delta_sink: &Bound<PyAny>,
     ) -> PyResult<()> {
-        let idx = node_indices(nodes, "nodes", self.n_nodes())?;
-        match &mut self.inner {
-            Inner::F(g) => {
-                let (s, t) = (
-                    f64_caps(delta_source, "delta_source")?,
-                    f64_caps(delta_sink, "delta_sink")?,
-                );
-                g.update_tweights_batch(&idx, &s, &t)?;
-            }
-            Inner::I(g) => {
-                let (s, t) = (
-                    i64_caps(delta_source, "delta_source")?,
-                    i64_caps(delta_sink, "delta_sink")?,
-                );
-                g.update_tweights_batch(&idx, &s, &t)?;
-            }
-        }
-        Ok(())
+        self.terminal_batch(nodes, delta_source, delta_sink, true)
     }
 
     /// Builds the arc arrays from the edges added so far (otherwise the next `maxflow()`
