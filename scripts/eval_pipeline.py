@@ -123,6 +123,12 @@ def main(argv: list[str] | None = None) -> int:
         default="auto",
         help="tracker shape calibration (auto: on unless --height is given)",
     )
+    ap.add_argument(
+        "--depth-weight",
+        type=float,
+        default=0.0,
+        help="templates with the relief channel of this weight (default 0: the default database)",
+    )
     args = ap.parse_args(argv)
     if args.step < 1:
         ap.error("--step must be >= 1")
@@ -138,7 +144,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no sequences under {args.data}", file=sys.stderr)
         return 2
     config = PipelineConfig(**json.loads(args.config)) if args.config else PipelineConfig()
-    templates = dp.TemplateDatabase.default(progress=False)
+    if args.depth_weight:
+        templates = dp.TemplateDatabase.build(depth_weight=args.depth_weight, progress=False)
+    else:
+        templates = dp.TemplateDatabase.default(progress=False)
     rss_templates = _peak_rss_mib()
     modes = ["track", "scratch"] if args.mode == "both" else [args.mode]
 

@@ -45,6 +45,13 @@ pub struct DescriptorConfig {
     pub seed: u64,
     /// Normal estimation.
     pub normal_radius: usize,
+    /// Weight of the optional fourth value per bin, the body's relief: the depth of
+    /// each point relative to the body's centre, in units of the body's RMS radius
+    /// across the line of sight (so it is scale-invariant like the rest), summed per
+    /// bin like the normals. 0 (the default): off, the paper's normals-only
+    /// descriptor. The normals alone cannot tell an arm held toward the camera from
+    /// one hanging down in front of the body; the relief can (docs/templates.md).
+    pub depth_weight: f64,
 }
 
 impl Default for DescriptorConfig {
@@ -58,6 +65,7 @@ impl Default for DescriptorConfig {
             cells_per_sample: 4.0,
             seed: 0,
             normal_radius: 2,
+            depth_weight: 0.0,
         }
     }
 }
@@ -108,12 +116,26 @@ impl DescriptorConfig {
             (1..=32).contains(&self.normal_radius),
             "normal_radius",
             || format!("must be in 1..=32, got {}", self.normal_radius),
+        )?;
+        ensure(
+            self.depth_weight.is_finite() && (0.0..=100.0).contains(&self.depth_weight),
+            "depth_weight",
+            || format!("must be in 0..=100, got {}", self.depth_weight),
         )
     }
 
-    /// Values per descriptor: 3 per bin.
+    /// Values per bin: the normal sum, and the relief sum when `depth_weight` > 0.
+    pub fn values_per_bin(&self) -> usize {
+        if self.depth_weight > 0.0 {
+            4
+        } else {
+            3
+        }
+    }
+
+    /// Values per descriptor.
     pub fn dim(&self) -> usize {
-        3 * self.radial_bins * self.angular_bins
+        self.values_per_bin() * self.radial_bins * self.angular_bins
     }
 }
 
@@ -220,10 +242,40 @@ pub fn surface_context_from_points(
     normals: &[[f32; 3]],
     config: &DescriptorConfig,
 ) -> Result<SurfaceContext> {
+    surface_context_with_relief(pixels, normals, None, config)
+}
+
+/// [`surface_context_from_points`] with each point's relief (see
+/// [`DescriptorConfig::depth_weight`], before the weight), needed when the weight is
+/// not 0 and ignored when it is.
+pub fn surface_context_with_relief(
+    pixels: &[[f32; 2]],
+    normals: &[[f32; 3]],
+    relief: Option<&[f32]>,
+    config: &DescriptorConfig,
+) -> Result<SurfaceContext> {
     config.validate()?;
     ensure(pixels.len() == normals.len(), "normals", || {
         format!("has {} normals for {} points", normals.len(), pixels.len())
     })?;
+    let per = config.values_per_bin();
+    let relief = if per == 4 {
+        let r = relief.ok_or_else(|| {
+            Error::invalid(
+                "depth_weight",
+                "the relief channel needs depth: describe a depth image, not bare normals",
+            )
+        })?;
+        ensure(r.len() == pixels.len(), "relief", || {
+            format!("has {} values for {} points", r.len(), pixels.len())
+        })?;
+        ensure(r.iter().all(|v| v.is_finite()), "relief", || {
+            "must be finite".to_string()
+        })?;
+        Some(r)
+    } else {
+        None
+    };
     if pixels.len() < MIN_POINTS {
         return Err(Error::NoBody(format!(
             "the silhouette has {} pixels; at least {MIN_POINTS} are needed to describe it",
@@ -282,12 +334,15 @@ pub fn surface_context_from_points(
         "the silhouette is too small to sample".to_string()
     })?;
 
-    // Summary cells: count, mean position and normal sum (f64: order-independent up to
-    // rounding).
+    // Summary cells: count, mean position, normal sum and relief sum (f64:
+    // order-independent up to rounding).
     let fine = Grid::new(lo, hi, step / config.cells_per_sample.sqrt(), jitter);
-    let mut acc = vec![[0.0f64; 6]; fine.rows * fine.cols];
-    for (p, nrm) in pixels.iter().zip(normals) {
+    let mut acc = vec![[0.0f64; 7]; fine.rows * fine.cols];
+    for (k, (p, nrm)) in pixels.iter().zip(normals).enumerate() {
         let a = &mut acc[fine.cell(*p)];
+        if let Some(r) = relief {
+            a[6] += config.depth_weight * r[k] as f64;
+        }
         a[0] += 1.0;
         a[1] += p[0] as f64;
         a[2] += p[1] as f64;
@@ -296,7 +351,7 @@ pub fn surface_context_from_points(
         a[5] += nrm[2] as f64;
     }
     let inv_m = 1.0 / m as f64;
-    let cells: Vec<[f32; 5]> = acc
+    let cells: Vec<[f32; 6]> = acc
         .iter()
         .filter(|a| a[0] > 0.0)
         .map(|a| {
@@ -306,6 +361,7 @@ pub fn surface_context_from_points(
                 (a[3] * inv_m) as f32,
                 (a[4] * inv_m) as f32,
                 (a[5] * inv_m) as f32,
+                (a[6] * inv_m) as f32,
             ]
         })
         .collect();
@@ -340,10 +396,13 @@ pub fn surface_context_from_points(
                 if r2 >= outer2 {
                     continue;
                 }
-                let k = 3 * (bins.ring(r2) * na + bins.sector(du, dv));
+                let k = per * (bins.ring(r2) * na + bins.sector(du, dv));
                 desc[k] += c[2];
                 desc[k + 1] += c[3];
                 desc[k + 2] += c[4];
+                if per == 4 {
+                    desc[k + 3] += c[5];
+                }
             }
         });
     let positions = samples
@@ -525,9 +584,26 @@ impl Silhouette {
             .collect()
     }
 
+    /// Each point's relief: its depth relative to the centroid along the line of sight,
+    /// in units of the RMS distance of the points from the centroid across it (see
+    /// [`DescriptorConfig::depth_weight`]).
+    pub fn relief(&self) -> Vec<f32> {
+        let r = self.alignment.matrix();
+        let local: Vec<Vector3<f64>> = self
+            .cloud
+            .points
+            .iter()
+            .map(|p| r * (Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64) - self.centroid))
+            .collect();
+        let across = local.iter().map(|v| v.x * v.x + v.y * v.y).sum::<f64>();
+        let rms = (across / local.len().max(1) as f64).sqrt().max(1e-9);
+        local.iter().map(|v| (v.z / rms) as f32).collect()
+    }
+
     /// Its surface-context descriptors.
     pub fn surface_context(&self, config: &DescriptorConfig) -> Result<SurfaceContext> {
-        surface_context_from_points(&self.pixels(), &self.normals, config)
+        let relief = (config.depth_weight > 0.0).then(|| self.relief());
+        surface_context_with_relief(&self.pixels(), &self.normals, relief.as_deref(), config)
     }
 }
 
@@ -722,10 +798,23 @@ mod tests {
 
     #[test]
     fn invariant_to_translation_and_scale() {
+        // The paper's normals-only descriptor, and with the relief channel.
+        for depth_weight in [0.0, 3.0] {
+            let cfg = DescriptorConfig {
+                depth_weight,
+                ..Default::default()
+            };
+            invariances_hold(&cfg);
+        }
+    }
+
+    fn invariances_hold(cfg: &DescriptorConfig) {
+        let cfg = *cfg;
         let cam = Camera::itop();
-        let cfg = DescriptorConfig::default();
         let pose = arm_raised();
         let base = context(&render(&pose, &cam), &cam, &cfg);
+        assert_eq!(base.dim, cfg.dim());
+        assert_eq!(base.descriptors.len(), base.len() * cfg.dim());
         // Shifted in the image by an exact number of pixels: principal point moved.
         let shifted_cam = Camera::new(
             cam.fx,
@@ -758,9 +847,9 @@ mod tests {
             / base.len() as f32;
         assert!(
             same < 0.25 * typical,
-            "scale change moved descriptors by {same} of {typical}"
+            "scale change moved descriptors by {same} of {typical} ({cfg:?})"
         );
-        assert!(diff > 1.5 * same, "same {same} other pose {diff}");
+        assert!(diff > 1.5 * same, "same {same} other pose {diff} ({cfg:?})");
     }
 
     #[test]
@@ -877,6 +966,27 @@ mod tests {
             ..cfg
         };
         assert!(bad.validate().is_err());
+        for w in [-1.0, f64::NAN, 1e3] {
+            let bad = DescriptorConfig {
+                depth_weight: w,
+                ..cfg
+            };
+            assert!(bad.validate().is_err(), "depth_weight {w}");
+        }
+        // The relief channel needs depth: bare pixels and normals cannot give it.
+        let relief = DescriptorConfig {
+            depth_weight: 1.0,
+            ..cfg
+        };
+        let nm50 = vec![[0.0f32, 0.0, -1.0]; 50];
+        assert!(matches!(
+            surface_context_from_points(&px, &nm50, &relief),
+            Err(Error::InvalidArgument { .. })
+        ));
+        assert!(matches!(
+            surface_context_with_relief(&px, &nm50, Some(&[0.0; 49]), &relief),
+            Err(Error::InvalidArgument { .. })
+        ));
         let cam = Camera::itop();
         let empty = vec![0.0f32; cam.width * cam.height];
         let view = DepthView::new(&empty, cam.height, cam.width, "depth").unwrap();

@@ -28,7 +28,7 @@ use rayon::prelude::*;
 
 /// Version of the template file format and of the template definition; bump when
 /// either changes so stale caches are rebuilt.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 /// Poses per limb and view directions.
 pub const LIMB_POSES: usize = 4;
@@ -656,6 +656,7 @@ impl TemplateDatabase {
             d.cells_per_sample.to_bits(),
             d.seed,
             d.normal_radius as u64,
+            d.depth_weight.to_bits(),
         ]);
         for i in 0..NUM_TEMPLATES {
             words.extend(
@@ -862,14 +863,14 @@ pub struct TemplateArrays {
 }
 
 /// Number of values of [`config_to_vec`].
-pub const CONFIG_VALUES: usize = 15;
+pub const CONFIG_VALUES: usize = 16;
 /// Largest seed that survives the trip through f64.
 pub const MAX_SEED: u64 = 1 << 53;
 
 /// [`TemplateConfig`] as numbers: width, height, distance, field_height, renderer
 /// (0 super-quadric, 1 ellipsoid), mesh rings, sectors, then the descriptor's samples,
 /// radial_bins, angular_bins, inner_radius, outer_radius, cells_per_sample, seed,
-/// normal_radius.
+/// normal_radius, depth_weight.
 pub fn config_to_vec(c: &TemplateConfig) -> [f64; CONFIG_VALUES] {
     let d = &c.descriptor;
     [
@@ -891,6 +892,7 @@ pub fn config_to_vec(c: &TemplateConfig) -> [f64; CONFIG_VALUES] {
         d.cells_per_sample,
         d.seed as f64,
         d.normal_radius as f64,
+        d.depth_weight,
     ]
 }
 
@@ -936,6 +938,7 @@ pub fn config_from_vec(v: &[f64]) -> Result<TemplateConfig> {
             cells_per_sample: v[12],
             seed: int(v[13], "seed")? as u64,
             normal_radius: int(v[14], "normal_radius")?,
+            depth_weight: v[15],
         },
     };
     c.validate()?;
@@ -1918,9 +1921,19 @@ mod eval {
             } else {
                 TemplateRenderer::Superquadric
             };
+            // The relief channel's weight (docs/templates.md compares 0 and 3).
+            let depth_weight = std::env::var("DEPTHPOSE_EVAL_DEPTH_WEIGHT")
+                .ok()
+                .and_then(|v| v.parse().ok())
+                .unwrap_or(0.0);
+            let d = TemplateConfig::default();
             let cfg = TemplateConfig {
                 renderer,
-                ..Default::default()
+                descriptor: DescriptorConfig {
+                    depth_weight,
+                    ..d.descriptor
+                },
+                ..d
             };
             TemplateDatabase::build(&BodyModel::default(), &cfg).unwrap()
         })

@@ -203,17 +203,15 @@ def test_initial_pose_on_synthetic_front_walk(db):
     assert np.mean(ok) > 0.6
 
 
-def test_retrieval_on_perturbed_model_renders(db):
-    """The issue's retrieval test: our ellipsoid model rendered in 60 random template
-    poses, joint angles and yaw perturbed by U(±0.1 rad), placed off-centre at 2.6–4 m,
-    5 mm noise. Targets of the issue: top-1 95 %, top-10 99 %; reached (docs/templates.md):
-    top-1 ≈ 55–60 % counting exact ties (indistinguishable templates), top-10 ≈ 100 %."""
+def _retrieval(db: TemplateDatabase, n: int = 60) -> tuple[int, int]:
+    """Top-1 (counting exact ties) and top-10 hits of ``db`` over our ellipsoid model
+    rendered in ``n`` random template poses, joint angles and yaw perturbed by
+    U(±0.1 rad), placed off-centre at 2.6–4 m, 5 mm noise (the same draw every call)."""
     model = _core.BodyModel(1.75)
     cam = Camera.itop()
     rng = np.random.default_rng(1)
     lo, hi = model.lower_bounds, model.upper_bounds
     top1 = top10 = 0
-    n = 60
     for index in rng.choice(768, size=n, replace=False):
         pose = db.poses[index].copy()
         pose[4] += rng.uniform(-0.1, 0.1)
@@ -226,9 +224,41 @@ def test_retrieval_on_perturbed_model_renders(db):
         costs = {c.index: c.cost for c in found}
         top10 += index in costs
         top1 += index in costs and costs[index] <= found[0].cost + 1e-9
+    return top1, top10
+
+
+def test_retrieval_on_perturbed_model_renders(db):
+    """The issue's retrieval test. Targets of the issue: top-1 95 %, top-10 99 %;
+    reached (docs/templates.md): top-1 ≈ 55–70 % counting exact ties (indistinguishable
+    templates), top-10 ≈ 100 %."""
+    n = 60
+    top1, top10 = _retrieval(db, n)
     print(f"retrieval: top-1 (ties) {top1}/{n}, top-10 {top10}/{n}")
     assert top10 >= 0.95 * n, (top1, top10)
     assert top1 >= 0.5 * n, (top1, top10)
+
+
+def test_relief_channel_improves_retrieval(db, tmp_path):
+    """``depth_weight`` adds the body's relief to every bin (4 values per bin): the same
+    queries as above are retrieved more often at top-1 than with normals alone, and the
+    setting is part of the database's identity."""
+    relief = TemplateDatabase.build(depth_weight=3.0, progress=False)
+    assert relief.hash != db.hash
+    n = 60
+    base, _ = _retrieval(db, n)
+    top1, top10 = _retrieval(relief, n)
+    print(f"retrieval with relief: top-1 (ties) {top1}/{n} (normals only {base}), top-10 {top10}")
+    assert top1 >= base + 3, (top1, base)
+    assert top10 >= 0.95 * n
+    depth = _raycast(70, SMALL)
+    assert surface_context(depth, SMALL, depth_weight=3.0)[0].shape[1] == 4 * 5 * 12
+    with pytest.raises(InvalidInputError, match="depth_weight"):
+        surface_context(depth, SMALL, depth_weight=-1.0)
+    path = tmp_path / "relief.npz"
+    relief.save(path)
+    assert TemplateDatabase.load(path, depth_weight=3.0).hash == relief.hash
+    with pytest.raises(FileFormatError):
+        TemplateDatabase.load(path, depth_weight=0.0)
 
 
 def test_database_of_another_model_is_refused(db, tmp_path):

@@ -98,6 +98,7 @@ def surface_context(
     radial_bins: int = 5,
     angular_bins: int = 12,
     seed: int = 0,
+    depth_weight: float = 0.0,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def _default_model_shape() -> npt.NDArray[np.float64]: ...
 
@@ -115,6 +116,7 @@ class _TemplateDatabase:
         radial_bins: int = 5,
         angular_bins: int = 12,
         seed: int = 0,
+        depth_weight: float = 0.0,
         progress: Callable[[int, int], object] | None = None,
     ) -> _TemplateDatabase: ...
     @staticmethod
@@ -130,6 +132,7 @@ class _TemplateDatabase:
         radial_bins: int = 5,
         angular_bins: int = 12,
         seed: int = 0,
+        depth_weight: float = 0.0,
     ) -> _TemplateDatabase: ...
     @staticmethod
     def render_template(
@@ -194,6 +197,7 @@ class _TemplateDatabase:
         radial_bins: int = 5,
         angular_bins: int = 12,
         seed: int = 0,
+        depth_weight: float = 0.0,
     ) -> tuple[str, npt.NDArray[np.float64]]: ...
     @property
     def hash(self) -> str: ...

@@ -45,6 +45,7 @@ _SETTING_NAMES = (
     "radial_bins",
     "angular_bins",
     "seed",
+    "depth_weight",
 )
 
 
@@ -156,6 +157,7 @@ class TemplateDatabase:
         radial_bins: int = 5,
         angular_bins: int = 12,
         seed: int = 0,
+        depth_weight: float = 0.0,
         progress: bool = True,
     ) -> TemplateDatabase:
         """Renders and describes the 768 templates.
@@ -164,7 +166,10 @@ class TemplateDatabase:
         "ellipsoid" (Rust ray cast of the fitting ellipsoids) or "trimesh" (trimesh ray
         casting of the same super-quadric meshes; slow without embree). ``camera``, if
         given, sets the template image size (the templates are always rendered with
-        the body centred; descriptors are scale-invariant).
+        the body centred; descriptors are scale-invariant). ``depth_weight`` > 0
+        adds the body's relief (depth relative to its centre) as a fourth value per
+        bin, a depthpose extension of the paper's normals-only descriptor; off by
+        default (docs/templates.md has its effect on retrieval and on the pipeline).
         """
         if camera is not None:
             width, height = camera.width, camera.height
@@ -188,6 +193,7 @@ class TemplateDatabase:
                 radial_bins=radial_bins,
                 angular_bins=angular_bins,
                 seed=seed,
+                depth_weight=depth_weight,
             )
         else:
             native = _core._TemplateDatabase.build(
@@ -201,6 +207,7 @@ class TemplateDatabase:
                 radial_bins=radial_bins,
                 angular_bins=angular_bins,
                 seed=seed,
+                depth_weight=depth_weight,
                 progress=report,
             )
         return cls(native)

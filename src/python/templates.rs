@@ -38,6 +38,7 @@ fn config_of(
     radial_bins: i128,
     angular_bins: i128,
     seed: i128,
+    depth_weight: f64,
 ) -> PyResult<TemplateConfig> {
     let (width, height) = (count(width, "width")?, count(height, "height")?);
     let samples = count(samples, "samples")?;
@@ -70,6 +71,7 @@ fn config_of(
             radial_bins,
             angular_bins,
             seed,
+            depth_weight,
             ..d.descriptor
         },
         ..d
@@ -81,10 +83,11 @@ fn config_of(
 /// (vertices, faces) of a mesh.
 type MeshArrays<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>);
 
-/// Surface-context descriptors of the (masked) body in `depth`: (descriptors (N, 3·bins)
+/// Surface-context descriptors of the (masked) body in `depth`: (descriptors (N, 3·bins,
+/// or 4·bins with `depth_weight` > 0)
 /// float32, sample pixels (N, 2) float32 as [u, v], normalised positions (N, 2)).
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, *, samples=100, radial_bins=5, angular_bins=12, seed=0))]
+#[pyo3(signature = (depth, camera, mask=None, *, samples=100, radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn surface_context<'py>(
     py: Python<'py>,
@@ -95,6 +98,7 @@ fn surface_context<'py>(
     radial_bins: i128,
     angular_bins: i128,
     seed: i128,
+    depth_weight: f64,
 ) -> PyResult<(
     Bound<'py, PyArrayDyn<f32>>,
     Bound<'py, PyArrayDyn<f32>>,
@@ -107,6 +111,7 @@ fn surface_context<'py>(
         radial_bins: count(radial_bins, "radial_bins")?,
         angular_bins: count(angular_bins, "angular_bins")?,
         seed: arg_seed(seed, "seed")?,
+        depth_weight,
         ..Default::default()
     };
     let sc = py.detach(|| -> crate::Result<_> {
@@ -134,7 +139,7 @@ impl PyTemplateDatabase {
     #[staticmethod]
     #[pyo3(signature = (model_shape=None, *, width=96, height=96, distance=3.0, field_height=2.4,
                         renderer="superquadric", samples=100, radial_bins=5, angular_bins=12,
-                        seed=0, progress=None))]
+                        seed=0, depth_weight=0.0, progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn build(
         py: Python<'_>,
@@ -148,6 +153,7 @@ impl PyTemplateDatabase {
         radial_bins: i128,
         angular_bins: i128,
         seed: i128,
+        depth_weight: f64,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
@@ -161,6 +167,7 @@ impl PyTemplateDatabase {
             radial_bins,
             angular_bins,
             seed,
+            depth_weight,
         )?;
         let mut callback_error: Option<PyErr> = None;
         let db = py.detach(|| {
@@ -184,7 +191,7 @@ impl PyTemplateDatabase {
     /// float32 metres for the camera of the settings, in template order.
     #[staticmethod]
     #[pyo3(signature = (depths, model_shape=None, *, width=96, height=96, distance=3.0,
-                        field_height=2.4, samples=100, radial_bins=5, angular_bins=12, seed=0))]
+                        field_height=2.4, samples=100, radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn from_depths(
         py: Python<'_>,
@@ -198,6 +205,7 @@ impl PyTemplateDatabase {
         radial_bins: i128,
         angular_bins: i128,
         seed: i128,
+        depth_weight: f64,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
         let cfg = config_of(
@@ -210,6 +218,7 @@ impl PyTemplateDatabase {
             radial_bins,
             angular_bins,
             seed,
+            depth_weight,
         )?;
         let d = f32_array(depths, "depths", Some(3), false)?;
         let (height, width) = (cfg.height, cfg.width);
@@ -254,6 +263,7 @@ impl PyTemplateDatabase {
             d.descriptor.radial_bins as i128,
             d.descriptor.angular_bins as i128,
             d.descriptor.seed as i128,
+            d.descriptor.depth_weight,
         )?;
         let index = count(index, "index")?;
         let depth = py.detach(|| crate::templates::render_template(&model, &cfg, index))?;
@@ -518,7 +528,7 @@ impl PyTemplateDatabase {
     /// The settings hash this database's model and settings give (hex).
     #[staticmethod]
     #[pyo3(signature = (model_shape=None, *, width=96, height=96, distance=3.0, field_height=2.4,
-                        renderer="superquadric", samples=100, radial_bins=5, angular_bins=12, seed=0))]
+                        renderer="superquadric", samples=100, radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0))]
     #[allow(clippy::too_many_arguments)]
     fn settings(
         py: Python<'_>,
@@ -532,6 +542,7 @@ impl PyTemplateDatabase {
         radial_bins: i128,
         angular_bins: i128,
         seed: i128,
+        depth_weight: f64,
     ) -> PyResult<(String, Py<PyAny>)> {
         let model = model_of(model_shape)?;
         let cfg = config_of(
@@ -544,6 +555,7 @@ impl PyTemplateDatabase {
             radial_bins,
             angular_bins,
             seed,
+            depth_weight,
         )?;
         let v = crate::templates::config_to_vec(&cfg).to_vec();
         let n = v.len();
