@@ -725,6 +725,8 @@ impl<C: Capacity> Graph<C> {
                 return Err(Error::invalid(name, format!("must be finite, got {d:?}")));
             }
         }
+        // Charged first: within the budget, the sums below cannot overflow.
+        let total = self.charged("delta_source", [delta_source, delta_sink].into_iter())?;
         if let Some(t) = &self.terminal_caps {
             let [s, k] = t[i];
             if s + delta_source < C::ZERO || k + delta_sink < C::ZERO {
@@ -734,7 +736,7 @@ impl<C: Capacity> Graph<C> {
                 ));
             }
         }
-        self.exact_total = self.charged("delta_source", [delta_source, delta_sink].into_iter())?;
+        self.exact_total = total;
         self.update_tweights_unchecked(i, delta_source, delta_sink);
         Ok(())
     }
@@ -761,6 +763,11 @@ impl<C: Capacity> Graph<C> {
             &[("delta_source", delta_source), ("delta_sink", delta_sink)],
             false,
         )?;
+        // Charged first: within the budget, the running sums below cannot overflow.
+        let total = self.charged(
+            "delta_source",
+            delta_source.iter().chain(delta_sink).copied(),
+        )?;
         if let Some(t) = &self.terminal_caps {
             // Running capacities of the nodes named, so repeated nodes are checked on
             // their sum.
@@ -779,10 +786,7 @@ impl<C: Capacity> Graph<C> {
                 }
             }
         }
-        self.exact_total = self.charged(
-            "delta_source",
-            delta_source.iter().chain(delta_sink).copied(),
-        )?;
+        self.exact_total = total;
         for k in 0..m {
             self.update_tweights_unchecked(nodes[k] as usize, delta_source[k], delta_sink[k]);
         }
@@ -2578,6 +2582,17 @@ mod tests {
         g.add_tweights(0, big / 4, 0).unwrap();
         g.add_tweights(2, 0, big / 8).unwrap();
         assert_eq!(g.maxflow(), big / 8);
+        // With tracked capacities the budget is checked before the new capacity is
+        // formed: 2^62 + (2^62 + 2^61) would overflow (a panic in debug builds).
+        let mut t = Graph::<i64>::new(1);
+        t.track_terminal_caps();
+        t.add_tweights(0, big, 0).unwrap();
+        let huge = big + big / 2;
+        assert_eq!(name_of(t.update_tweights(0, huge, 0)), "delta_source");
+        assert_eq!(
+            name_of(t.update_tweights_batch(&[0], &[huge], &[0])),
+            "delta_source"
+        );
         // Floats have no such budget (they round, and overflow only to infinity).
         let mut f = Graph::<f64>::new(2);
         for _ in 0..4 {
