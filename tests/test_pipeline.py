@@ -311,8 +311,9 @@ def test_tracker_recovers_from_a_swapped_start(side_walk, templates):
 
 
 def test_more_finals_never_explain_the_depth_worse(side_walk, templates):
-    """The finals are the best candidates by discrepancy, refined; the best of them is
-    kept, so refining more of them can only lower the discrepancy of the result."""
+    """The finals are the best candidates by discrepancy plus rest-pose penalty,
+    refined; the best of them is kept, so refining more of them can only lower that
+    score of the result."""
     from depthpose.pipeline import PipelineConfig
 
     seq, cam, bg = side_walk
@@ -331,5 +332,62 @@ def test_more_finals_never_explain_the_depth_worse(side_walk, templates):
             # it is labelled at every pixel (not only on its stride-2 grid).
             assert 1 <= res.iterations <= est.config.final_iterations
             assert np.any(res.labels[1::2, 1::2] >= 0)
-            scores.append(res.discrepancy)
+            scores.append(res.discrepancy + est.penalty(res.pose)[0])
         assert scores[0] >= scores[1] >= scores[2], scores
+
+
+def test_rest_pose_penalty_weighs_the_limb_angles_only():
+    from depthpose.pipeline import PipelineConfig, rest_pose_penalty
+
+    rng = np.random.default_rng(5)
+    poses = rng.uniform(-1, 1, (4, 22))
+    want = 0.01 * (poses[:, 8:] ** 2).sum(axis=1)
+    np.testing.assert_allclose(rest_pose_penalty(poses, 0.01), want, rtol=1e-12)
+    # Root, neck: free; one limb angle of 1 rad costs the weight.
+    p = np.zeros(22)
+    p[:8] = rng.uniform(-1, 1, 8)
+    assert rest_pose_penalty(p, 0.3)[0] == 0.0
+    p[11] = 1.0  # right elbow
+    assert rest_pose_penalty(p, 0.3)[0] == pytest.approx(0.3)
+    assert (rest_pose_penalty(poses, 0.0) == 0).all()
+    for bad in (-0.1, np.nan, np.inf):
+        with pytest.raises(dp.InvalidInputError, match="pose_prior_weight"):
+            PipelineConfig(pose_prior_weight=bad).validate()
+
+
+def test_rest_pose_term_prefers_the_ordinary_twin_of_a_hidden_arm(side_walk, templates):
+    """In a side view the far arm can hide behind the torso. With the arm down and
+    with it raised sideways (pointing away from the camera) the depth is the same, so
+    the discrepancy alone cannot choose; the rest-pose term picks the ordinary pose,
+    and a visible difference still outweighs it."""
+    from depthpose.pipeline import PipelineConfig
+
+    seq, cam, bg = side_walk
+    depth = seq["depth"][0].astype(np.float32) / 1000
+    est = PoseEstimator(cam, templates=templates, background=bg)
+    mask = est._mask(depth, None)
+    truth = np.asarray(seq["poses"][0], np.float64)
+    d_truth = est.discrepancy(truth, depth, mask)
+    model = est.model
+    # Which arm is the far one: the shoulder farther from the camera.
+    joints = np.asarray(model.joints(truth))
+    far = slice(8, 12) if joints[2, 2] > joints[3, 2] else slice(12, 16)
+    raised = truth.copy()
+    raised[far] = [0.0, 1.5, 0.0, 0.0]  # shoulder abducted 86°: along the view ray
+    raised = np.clip(raised, model.lower_bounds, model.upper_bounds)
+    d_raised = est.discrepancy(raised, depth, mask)
+    # Hidden either way: the depth cannot tell them apart (within 2 % of the score)...
+    assert abs(d_raised - d_truth) < 0.02 * d_truth + 1e-3, (d_truth, d_raised)
+    # ... and the rest-pose term ranks the ordinary one first by a clear margin.
+    gap = est.penalty(raised)[0] - est.penalty(truth)[0]
+    assert gap > 0.005
+    # A visible error (the near arm raised forward into view) costs more depth than
+    # the term can make up.
+    near = slice(12, 16) if far.start == 8 else slice(8, 12)
+    wrong = truth.copy()
+    wrong[near] = [1.5, 0.0, 0.0, 0.0]
+    assert est.discrepancy(wrong, depth, mask) - d_truth > 10 * (
+        est.penalty(wrong)[0] - est.penalty(truth)[0]
+    )
+    off = PoseEstimator(cam, templates=templates, config=PipelineConfig(pose_prior_weight=0))
+    assert off.penalty(raised)[0] == 0.0
