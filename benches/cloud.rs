@@ -2,8 +2,8 @@
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use depthpose::cloud::{
-    neighbour_graph, neighbour_graph_into, normals_from_depth, normals_into, Cloud, Connectivity,
-    DepthView, NormalConfig, PixelGraph,
+    foreground_mask, neighbour_graph, neighbour_graph_into, normals_from_depth, normals_into,
+    Cloud, Connectivity, DepthView, ForegroundConfig, NormalConfig, PixelGraph,
 };
 use depthpose::Camera;
 use std::hint::black_box;
@@ -63,7 +63,28 @@ fn bench_cloud(c: &mut Criterion) {
     );
 }
 
-criterion_group!(benches, bench_cloud, bench_cloud_steps);
+/// Foreground extraction of a 320×240 frame (every frame of the tracker): the blob in
+/// front of a wall at 4 m, with and without the empty scene as background.
+fn bench_foreground(c: &mut Criterion) {
+    let cam = Camera::kinect_v1_qvga();
+    let depth = frame(&Camera::kinect_v1())
+        .chunks_exact(640)
+        .step_by(2)
+        .flat_map(|row| row.iter().step_by(2).copied())
+        .collect::<Vec<f32>>();
+    let background = vec![4.0f32; depth.len()];
+    let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+    let bg = DepthView::new(&background, cam.height, cam.width, "background").unwrap();
+    let config = ForegroundConfig::default();
+    c.bench_function("foreground_320x240_background", |b| {
+        b.iter(|| black_box(foreground_mask(&view, Some(&bg), &config).unwrap()))
+    });
+    c.bench_function("foreground_320x240_no_background", |b| {
+        b.iter(|| black_box(foreground_mask(&view, None, &config).unwrap()))
+    });
+}
+
+criterion_group!(benches, bench_cloud, bench_cloud_steps, bench_foreground);
 criterion_main!(benches);
 
 /// Each step of the reused path alone, to see where the time goes: the full frame, then

@@ -103,23 +103,21 @@ pub fn foreground_mask(
     }
     let n = depth.data.len();
     let in_range = |z: f32| z > config.min_depth && z < config.max_depth;
-    let candidate: Vec<bool> = (0..n)
-        .map(|i| {
-            let z = depth.data[i];
-            if !in_range(z) {
-                return false;
+    // Branch-free per pixel (the loops vectorise); the background test only with one.
+    let mut candidate = vec![false; n];
+    match background {
+        Some(bg) => {
+            let (t0, t2) = (config.bg_tolerance, config.bg_tolerance_quadratic);
+            for ((c, &z), &b) in candidate.iter_mut().zip(depth.data).zip(bg.data) {
+                *c = in_range(z) & (b.is_nan() | (b <= 0.0) | (z < b - (t0 + t2 * b * b)));
             }
-            match background {
-                Some(bg) => {
-                    let b = bg.data[i];
-                    b.is_nan()
-                        || b <= 0.0
-                        || z < b - (config.bg_tolerance + config.bg_tolerance_quadratic * b * b)
-                }
-                None => true,
+        }
+        None => {
+            for (c, &z) in candidate.iter_mut().zip(depth.data) {
+                *c = in_range(z);
             }
-        })
-        .collect();
+        }
+    }
     if !candidate.iter().any(|&c| c) {
         return Err(Error::NoBody(if depth.count_valid() == 0 {
             "depth: the image has no valid reading (all zero or NaN)".into()
@@ -127,7 +125,7 @@ pub fn foreground_mask(
             "depth: no foreground pixel (nothing in range / in front of the background)".into()
         }));
     }
-    let components = Components::label(depth, &candidate, config.max_step);
+    let components = Components::label(depth, &candidate, config.max_step, config.min_component);
     let keep = components.select_body(config);
     if keep.is_empty() {
         return Err(Error::NoBody(format!(
@@ -136,16 +134,25 @@ pub fn foreground_mask(
         )));
     }
     let mut keep_flag = vec![false; components.stats.len()];
+    // Dropouts can only be filled inside the kept components' bounding box.
+    let mut bbox = [usize::MAX, usize::MAX, 0, 0];
     for k in keep {
         keep_flag[k] = true;
+        let b = components.stats[k].bbox;
+        bbox = [
+            bbox[0].min(b[0]),
+            bbox[1].min(b[1]),
+            bbox[2].max(b[2]),
+            bbox[3].max(b[3]),
+        ];
     }
-    let mut mask: Vec<bool> = components
-        .label
-        .iter()
-        .map(|&l| l >= 0 && keep_flag[l as usize])
-        .collect();
+    let mut mask = vec![false; n];
+    for &i in &components.pixels {
+        mask[i as usize] = keep_flag[components.label[i as usize] as usize];
+    }
+    let mut added = Vec::new();
     for _ in 0..DROPOUT_FILL_PASSES {
-        fill_dropouts(depth, &mut mask);
+        fill_dropouts(depth, &mut mask, bbox, &mut added);
     }
     Ok(mask)
 }
@@ -157,12 +164,15 @@ const DROPOUT_FILL_PASSES: usize = 2;
 /// neighbours along a row or a column, or three of the four 4-neighbours, in the mask.
 /// These are sensor dropouts on the body, part of its silhouette (they add no points).
 /// A real hole in the body's outline shows the scene behind it, has a reading, and stays
-/// a hole.
-fn fill_dropouts(depth: &DepthView, mask: &mut [bool]) {
+/// a hole. Only pixels inside `bbox` (row0, col0, row1, col1; the mask's bounding box)
+/// can qualify: outside it at most one neighbour is in the mask. `add` is scratch.
+fn fill_dropouts(depth: &DepthView, mask: &mut [bool], bbox: [usize; 4], add: &mut Vec<usize>) {
     let (w, h) = (depth.width, depth.height);
-    let mut add = Vec::new();
-    for row in 1..h.saturating_sub(1) {
-        for col in 1..w.saturating_sub(1) {
+    add.clear();
+    let rows = bbox[0].max(1)..(bbox[2] + 1).min(h.saturating_sub(1));
+    let cols = bbox[1].max(1)..(bbox[3] + 1).min(w.saturating_sub(1));
+    for row in rows {
+        for col in cols.clone() {
             let i = row * w + col;
             if mask[i] || depth.data[i] > 0.0 {
                 continue;
@@ -174,7 +184,7 @@ fn fill_dropouts(depth: &DepthView, mask: &mut [bool]) {
             }
         }
     }
-    for i in add {
+    for &i in add.iter() {
         mask[i] = true;
     }
 }
@@ -188,70 +198,117 @@ struct ComponentStats {
 }
 
 struct Components {
+    /// Component of each pixel, −1 for non-candidates.
     label: Vec<i32>,
+    /// The candidate pixels, in raster order.
+    pixels: Vec<u32>,
     stats: Vec<ComponentStats>,
 }
 
 impl Components {
     /// Connected components of `candidate` pixels under 4-connectivity, joining two
-    /// neighbours only when their depths differ by at most `max_step`.
-    fn label(depth: &DepthView, candidate: &[bool], max_step: f32) -> Self {
+    /// neighbours only when their depths differ by at most `max_step`, numbered in the
+    /// raster order of their first pixel. Two passes: provisional labels from the left
+    /// and upper neighbours with their equivalences in a union–find over the labels
+    /// (not the pixels), then the final numbering and the statistics. The median depth
+    /// is computed only for components of at least `min_size` pixels (the only ones
+    /// [`Components::select_body`] looks at); smaller ones get NaN.
+    fn label(depth: &DepthView, candidate: &[bool], max_step: f32, min_size: usize) -> Self {
         let (w, h) = (depth.width, depth.height);
-        let mut uf = UnionFind::new(w * h);
+        let z = depth.data;
+        let mut label = vec![-1i32; w * h];
+        let mut pixels = Vec::new();
+        let mut uf = UnionFind::default();
+        // Most of a frame is background: runs without a candidate are skipped 16 at once.
+        const RUN: usize = 16;
         for row in 0..h {
-            for col in 0..w {
+            let mut col = 0;
+            while col < w {
                 let i = row * w + col;
+                col += 1;
                 if !candidate[i] {
+                    if col + RUN <= w && !candidate[i + 1..i + 1 + RUN].iter().any(|&c| c) {
+                        col += RUN;
+                    }
                     continue;
                 }
-                let z = depth.data[i];
-                if col + 1 < w && candidate[i + 1] && (depth.data[i + 1] - z).abs() <= max_step {
-                    uf.union(i, i + 1);
-                }
-                if row + 1 < h && candidate[i + w] && (depth.data[i + w] - z).abs() <= max_step {
-                    uf.union(i, i + w);
-                }
+                let col = col - 1;
+                pixels.push(i as u32);
+                let joins = |j: usize| candidate[j] && (z[j] - z[i]).abs() <= max_step;
+                let left = (col > 0 && joins(i - 1)).then(|| label[i - 1] as usize);
+                let up = (row > 0 && joins(i - w)).then(|| label[i - w] as usize);
+                label[i] = match (left, up) {
+                    (Some(a), Some(b)) => {
+                        if a != b {
+                            uf.union(a, b);
+                        }
+                        a as i32
+                    }
+                    (Some(a), None) | (None, Some(a)) => a as i32,
+                    (None, None) => uf.push() as i32,
+                };
             }
         }
-        let mut label = vec![-1i32; w * h];
-        let mut root_label = vec![-1i32; w * h];
+        // Final numbering: first pixel in raster order first.
+        let mut final_id = vec![-1i32; uf.len()];
+        let mut stats: Vec<ComponentStats> = Vec::new();
+        let mut row = 0;
+        for &i in &pixels {
+            let i = i as usize;
+            // Raster order: the row only grows (no division per pixel).
+            while i >= (row + 1) * w {
+                row += 1;
+            }
+            let col = i - row * w;
+            let l = &mut label[i];
+            let root = uf.find(*l as usize);
+            if final_id[root] < 0 {
+                final_id[root] = stats.len() as i32;
+                stats.push(ComponentStats {
+                    size: 0,
+                    median_depth: f32::NAN,
+                    bbox: [usize::MAX, usize::MAX, 0, 0],
+                });
+            }
+            *l = final_id[root];
+            let s = &mut stats[*l as usize];
+            s.size += 1;
+            s.bbox = [
+                s.bbox[0].min(row),
+                s.bbox[1].min(col),
+                s.bbox[2].max(row),
+                s.bbox[3].max(col),
+            ];
+        }
+        // Medians of the components large enough to matter.
+        let mut slot = vec![usize::MAX; stats.len()];
         let mut depths: Vec<Vec<f32>> = Vec::new();
-        let mut bboxes: Vec<[usize; 4]> = Vec::new();
-        for i in 0..w * h {
-            if !candidate[i] {
-                continue;
+        for (k, s) in stats.iter().enumerate() {
+            if s.size >= min_size {
+                slot[k] = depths.len();
+                depths.push(Vec::with_capacity(s.size));
             }
-            let r = uf.find(i);
-            if root_label[r] < 0 {
-                root_label[r] = depths.len() as i32;
-                depths.push(Vec::new());
-                bboxes.push([usize::MAX, usize::MAX, 0, 0]);
-            }
-            let l = root_label[r];
-            label[i] = l;
-            depths[l as usize].push(depth.data[i]);
-            let (row, col) = (i / w, i % w);
-            let b = &mut bboxes[l as usize];
-            b[0] = b[0].min(row);
-            b[1] = b[1].min(col);
-            b[2] = b[2].max(row);
-            b[3] = b[3].max(col);
         }
-        let stats = depths
-            .into_iter()
-            .zip(bboxes)
-            .map(|(mut d, bbox)| {
-                let size = d.len();
-                let mid = size / 2;
-                let (_, m, _) = d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
-                ComponentStats {
-                    size,
-                    median_depth: *m,
-                    bbox,
+        if !depths.is_empty() {
+            for &i in &pixels {
+                let k = slot[label[i as usize] as usize];
+                if k != usize::MAX {
+                    depths[k].push(z[i as usize]);
                 }
-            })
-            .collect();
-        Components { label, stats }
+            }
+            for (k, s) in stats.iter_mut().enumerate() {
+                if slot[k] != usize::MAX {
+                    let d = &mut depths[slot[k]];
+                    let mid = d.len() / 2;
+                    s.median_depth = *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
+                }
+            }
+        }
+        Components {
+            label,
+            pixels,
+            stats,
+        }
     }
 
     /// The body: the nearest component among the large ones, plus large pieces next to it.
@@ -295,18 +352,24 @@ impl Components {
     }
 }
 
-/// Disjoint sets with path halving and union by size.
+/// Disjoint sets (of provisional component labels) with path halving and union by size.
+#[derive(Default)]
 struct UnionFind {
     parent: Vec<u32>,
     size: Vec<u32>,
 }
 
 impl UnionFind {
-    fn new(n: usize) -> Self {
-        UnionFind {
-            parent: (0..n as u32).collect(),
-            size: vec![1; n],
-        }
+    /// A new singleton set; returns its element.
+    fn push(&mut self) -> usize {
+        let x = self.parent.len();
+        self.parent.push(x as u32);
+        self.size.push(1);
+        x
+    }
+
+    fn len(&self) -> usize {
+        self.parent.len()
     }
 
     fn find(&mut self, mut x: usize) -> usize {
@@ -334,6 +397,129 @@ impl UnionFind {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    /// Components by breadth-first flood fill from each unlabelled candidate in raster
+    /// order, with every median computed (a reference for the two-pass labelling).
+    fn flood_components(depth: &DepthView, candidate: &[bool], max_step: f32) -> Components {
+        let (w, h) = (depth.width, depth.height);
+        let mut label = vec![-1i32; w * h];
+        let mut stats = Vec::new();
+        for start in 0..w * h {
+            if !candidate[start] || label[start] >= 0 {
+                continue;
+            }
+            let id = stats.len() as i32;
+            let mut queue = std::collections::VecDeque::from([start]);
+            label[start] = id;
+            let (mut depths, mut bbox) = (Vec::new(), [usize::MAX, usize::MAX, 0, 0]);
+            while let Some(i) = queue.pop_front() {
+                let (row, col) = (i / w, i % w);
+                depths.push(depth.data[i]);
+                bbox = [
+                    bbox[0].min(row),
+                    bbox[1].min(col),
+                    bbox[2].max(row),
+                    bbox[3].max(col),
+                ];
+                let mut near = Vec::new();
+                if col > 0 {
+                    near.push(i - 1);
+                }
+                if col + 1 < w {
+                    near.push(i + 1);
+                }
+                if row > 0 {
+                    near.push(i - w);
+                }
+                if row + 1 < h {
+                    near.push(i + w);
+                }
+                for j in near {
+                    if candidate[j]
+                        && label[j] < 0
+                        && (depth.data[j] - depth.data[i]).abs() <= max_step
+                    {
+                        label[j] = id;
+                        queue.push_back(j);
+                    }
+                }
+            }
+            depths.sort_by(|a, b| a.total_cmp(b));
+            stats.push(ComponentStats {
+                size: depths.len(),
+                median_depth: depths[depths.len() / 2],
+                bbox,
+            });
+        }
+        let pixels = (0..w * h)
+            .filter(|&i| candidate[i])
+            .map(|i| i as u32)
+            .collect();
+        Components {
+            label,
+            pixels,
+            stats,
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// The two-pass labelling finds the flood fill's components with the same
+        /// numbering, sizes, boxes and (for large enough ones) medians; the mask fills
+        /// the same dropouts as a scan of the whole image would.
+        #[test]
+        fn components_match_a_flood_fill(
+            h in 1usize..14,
+            w in 1usize..41,
+            levels in proptest::collection::vec(0u8..6, 14 * 40),
+            step in prop_oneof![Just(0.05f32), Just(0.25f32)],
+            min_size in 0usize..6,
+        ) {
+            let values = [0.0f32, 1.0, 1.1, 1.2, 2.0, 3.0];
+            let depth: Vec<f32> = levels[..h * w].iter().map(|&k| values[k as usize]).collect();
+            let view = DepthView::new(&depth, h, w, "depth").unwrap();
+            let candidate: Vec<bool> = depth.iter().map(|&z| z > 0.3 && z < 2.5).collect();
+            let got = Components::label(&view, &candidate, step, min_size);
+            let want = flood_components(&view, &candidate, step);
+            prop_assert_eq!(&got.label, &want.label);
+            prop_assert_eq!(got.stats.len(), want.stats.len());
+            for (g, e) in got.stats.iter().zip(&want.stats) {
+                prop_assert_eq!(g.size, e.size);
+                prop_assert_eq!(g.bbox, e.bbox);
+                if g.size >= min_size {
+                    prop_assert_eq!(g.median_depth, e.median_depth);
+                } else {
+                    prop_assert!(g.median_depth.is_nan());
+                }
+            }
+            // The same candidates as above: readings in (0.3, 2.5) m.
+            let config = ForegroundConfig { min_depth: 0.3, max_depth: 2.5, min_component: min_size, max_step: step, ..Default::default() };
+            if let Ok(mask) = foreground_mask(&view, None, &config) {
+                // The same selection on the reference components, then dropouts filled
+                // by scanning every pixel.
+                let keep = want.select_body(&config);
+                let mut full: Vec<bool> = want.label.iter().map(|&l| l >= 0 && keep.contains(&(l as usize))).collect();
+                for _ in 0..DROPOUT_FILL_PASSES {
+                    let mut add = Vec::new();
+                    for i in 0..h * w {
+                        let (row, col) = (i / w, i % w);
+                        if row == 0 || col == 0 || row + 1 >= h || col + 1 >= w || full[i] || depth[i] > 0.0 {
+                            continue;
+                        }
+                        let (l, r, u, d) = (full[i - 1], full[i + 1], full[i - w], full[i + w]);
+                        if (l && r) || (u && d) || (l as u8 + r as u8 + u as u8 + d as u8) >= 3 {
+                            add.push(i);
+                        }
+                    }
+                    for i in add {
+                        full[i] = true;
+                    }
+                }
+                prop_assert_eq!(mask, full);
+            }
+        }
+    }
 
     fn img(h: usize, w: usize, f: impl Fn(usize, usize) -> f32) -> Vec<f32> {
         (0..h * w).map(|i| f(i / w, i % w)).collect()
