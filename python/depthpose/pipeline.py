@@ -123,7 +123,7 @@ class PipelineConfig:
     #: sideways, pointing away) scores as well as one that shows it: the term
     #: prefers the ordinary pose when the depth is silent. 0 turns it off. On the
     #: shared sequences (docs/pipeline.md, session 21) 0.005 tracked better from each
-    #: of 7 start frames (mean MPJPE 41.2 → 38.5 mm) and left from-scratch estimates
+    #: of 7 start frames (mean MPJPE 41.2 → 38.6 mm) and left from-scratch estimates
     #: unchanged (59.6 mm).
     pose_prior_weight: float = 0.005
     #: Fitting settings passed to ``fit_pose`` as ``FitConfig`` keywords (None = defaults).
