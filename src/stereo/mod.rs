@@ -332,7 +332,8 @@ fn match_padded(
             config.similarity,
         )
         .expect("both images have texture: the forward pass built its correlator");
-        let (disp_back, _, _) = grow_pass(&back, config, max_d, &[]);
+        let (disp_back, _, back_growers) = grow_pass(&back, config, max_d, &[]);
+        Grower::recycle(back_growers);
         left_right_check(&mut disp_int, &disp_back, width);
     }
     if config.fill_gaps {
@@ -370,6 +371,7 @@ fn match_padded(
                 *dv = d as f32 + offset;
             }
         });
+    Grower::recycle(growers);
     Ok(StereoResult {
         disparity,
         confidence,
@@ -404,7 +406,7 @@ fn grow_pass(
         .into_par_iter()
         .map(|band| {
             let rows = band * BAND_ROWS..((band + 1) * BAND_ROWS).min(height);
-            let mut grower = Grower::new();
+            let mut grower = Grower::pooled();
             grower.grow(corr, &all, max_d, config.threshold, rows);
             grower
         })

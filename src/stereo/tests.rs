@@ -525,6 +525,40 @@ fn result_does_not_depend_on_the_thread_count() {
 }
 
 #[test]
+fn results_do_not_depend_on_earlier_calls() {
+    // Growers are pooled between calls: one left by a larger pair with other settings
+    // must grow the next pair exactly as a new one would.
+    let bits = |a: &[f32]| a.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+    let (w, h) = (64, BAND_ROWS + 30);
+    let (left, right, _, _) = random_dots(w, h, 3, 5, (10, 20, 30, BAND_ROWS / 2));
+    let cfg = StereoConfig {
+        max_disparity: Some(12),
+        num_seeds: 60,
+        ..Default::default()
+    };
+    let before = match_stereo(&left, &right, h, w, &cfg).unwrap();
+    let (bw, bh) = (150, 2 * BAND_ROWS + 11);
+    let (big_l, big_r, _, _) = random_dots(bw, bh, 7, 8, (5, 25, 45, BAND_ROWS));
+    let other = StereoConfig {
+        max_disparity: Some(30),
+        lr_check: true,
+        threshold: 0.3,
+        ..Default::default()
+    };
+    for _ in 0..2 {
+        assert!(
+            match_stereo(&big_l, &big_r, bh, bw, &other)
+                .unwrap()
+                .matched()
+                > 0
+        );
+        let again = match_stereo(&left, &right, h, w, &cfg).unwrap();
+        assert_eq!(bits(&before.disparity), bits(&again.disparity));
+        assert_eq!(bits(&before.confidence), bits(&again.confidence));
+    }
+}
+
+#[test]
 fn top_and_bottom_rows_are_matched_through_reflected_padding() {
     // Rows within half a window of the top and bottom have their windows completed by
     // reflection (the same rows in both images), so they are matched correctly too.
