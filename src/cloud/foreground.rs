@@ -138,13 +138,7 @@ pub fn foreground_mask(
     let mut bbox = [usize::MAX, usize::MAX, 0, 0];
     for k in keep {
         keep_flag[k] = true;
-        let b = components.stats[k].bbox;
-        bbox = [
-            bbox[0].min(b[0]),
-            bbox[1].min(b[1]),
-            bbox[2].max(b[2]),
-            bbox[3].max(b[3]),
-        ];
+        bbox = union_box(bbox, components.stats[k].bbox);
     }
     let mut mask = vec![false; n];
     for &i in &components.pixels {
@@ -189,6 +183,17 @@ fn fill_dropouts(depth: &DepthView, mask: &mut [bool], bbox: [usize; 4], add: &m
     }
 }
 
+/// The smallest box (row0, col0, row1, col1, inclusive) holding boxes `a` and `b`; the
+/// empty box is `[usize::MAX, usize::MAX, 0, 0]`.
+fn union_box(a: [usize; 4], b: [usize; 4]) -> [usize; 4] {
+    [
+        a[0].min(b[0]),
+        a[1].min(b[1]),
+        a[2].max(b[2]),
+        a[3].max(b[3]),
+    ]
+}
+
 /// Per-component statistics.
 #[derive(Debug, Clone)]
 struct ComponentStats {
@@ -222,17 +227,18 @@ impl Components {
         // Most of a frame is background: runs without a candidate are skipped 16 at once.
         const RUN: usize = 16;
         for row in 0..h {
-            let mut col = 0;
-            while col < w {
+            let mut next = 0; // the next column to look at
+            while next < w {
+                let col = next;
                 let i = row * w + col;
-                col += 1;
+                next += 1;
                 if !candidate[i] {
-                    if col + RUN <= w && !candidate[i + 1..i + 1 + RUN].iter().any(|&c| c) {
-                        col += RUN;
+                    // Skip the following RUN columns too when none of them is a candidate.
+                    if next + RUN <= w && !candidate[i + 1..i + 1 + RUN].iter().any(|&c| c) {
+                        next += RUN;
                     }
                     continue;
                 }
-                let col = col - 1;
                 pixels.push(i as u32);
                 let joins = |j: usize| candidate[j] && (z[j] - z[i]).abs() <= max_step;
                 let left = (col > 0 && joins(i - 1)).then(|| label[i - 1] as usize);
@@ -273,12 +279,7 @@ impl Components {
             *l = final_id[root];
             let s = &mut stats[*l as usize];
             s.size += 1;
-            s.bbox = [
-                s.bbox[0].min(row),
-                s.bbox[1].min(col),
-                s.bbox[2].max(row),
-                s.bbox[3].max(col),
-            ];
+            s.bbox = union_box(s.bbox, [row, col, row, col]);
         }
         // Medians of the components large enough to matter.
         let mut slot = vec![usize::MAX; stats.len()];
@@ -416,12 +417,7 @@ mod tests {
             while let Some(i) = queue.pop_front() {
                 let (row, col) = (i / w, i % w);
                 depths.push(depth.data[i]);
-                bbox = [
-                    bbox[0].min(row),
-                    bbox[1].min(col),
-                    bbox[2].max(row),
-                    bbox[3].max(col),
-                ];
+                bbox = union_box(bbox, [row, col, row, col]);
                 let mut near = Vec::new();
                 if col > 0 {
                     near.push(i - 1);
