@@ -10,7 +10,10 @@ the same disparity range and prints a Markdown table:
 - density: share of ground-truth pixels that got a disparity;
 - time: best of ``--repeat`` runs (the methods take turns), in seconds per megapixel,
   as wall-clock time and as CPU time of the process (all threads). On a shared machine
-  the wall time depends on the load; the CPU time much less.
+  the wall time depends on the load; the CPU time much less;
+- the CPU-time ratio to each SGBM mode, run by run (median and quartiles): the methods
+  run back to back in each repeat, so the ratio cancels the machine's speed swings that
+  best-of-N times of separate methods do not.
 
 SGBM runs in two modes: OpenCV's default (``MODE_SGBM``, single-threaded, 5 paths) and
 ``MODE_SGBM_3WAY`` (3 paths, parallel over rows: OpenCV's fastest SGBM on several
@@ -121,22 +124,34 @@ def score(disp: np.ndarray, gt: np.ndarray, seconds: float, cpu_seconds: float =
 
 def timed(
     fns: list[Callable[[], np.ndarray]], repeat: int
-) -> list[tuple[np.ndarray, float, float]]:
-    """Output, best wall time and best CPU time (s) over `repeat` runs of each function.
+) -> list[tuple[np.ndarray, list[float], list[float]]]:
+    """Output, wall times and CPU times (s) of `repeat` runs of each function.
 
     The functions take turns within each repeat, so a slow phase of a shared machine
     hits all of them alike instead of whichever happened to run during it.
     """
     outs = [fn() for fn in fns]  # warm-up (thread pools, caches)
-    best = [float("inf")] * len(fns)
-    best_cpu = [float("inf")] * len(fns)
+    wall: list[list[float]] = [[] for _ in fns]
+    cpu: list[list[float]] = [[] for _ in fns]
     for _ in range(repeat):
         for i, fn in enumerate(fns):
             t0, c0 = time.perf_counter(), time.process_time()
             outs[i] = fn()
-            best[i] = min(best[i], time.perf_counter() - t0)
-            best_cpu[i] = min(best_cpu[i], time.process_time() - c0)
-    return list(zip(outs, best, best_cpu, strict=True))
+            wall[i].append(time.perf_counter() - t0)
+            cpu[i].append(time.process_time() - c0)
+    return list(zip(outs, wall, cpu, strict=True))
+
+
+def paired_ratio(ours_cpu: list[float], theirs_cpu: list[float]) -> tuple[float, float, float]:
+    """Median and quartiles of our CPU time over theirs, repeat by repeat.
+
+    Each repeat runs the methods back to back, so their ratio cancels the machine's
+    slow and fast phases that make best-of-N times of separate methods drift apart
+    (on a shared virtual machine the speed swings by tens of percent within minutes).
+    """
+    r = np.asarray(ours_cpu) / np.asarray(theirs_cpu)
+    q1, med, q3 = np.percentile(r, [25, 50, 75])
+    return float(med), float(q1), float(q3)
 
 
 def ours(pair: Pair, **options: object) -> Callable[[], np.ndarray]:
@@ -170,8 +185,11 @@ def sgbm(pair: Pair, three_way: bool = False) -> Callable[[], np.ndarray] | None
     return run
 
 
-def evaluate(root: Path, repeat: int) -> tuple[list[tuple[str, str, Score]], bool]:
+def evaluate(
+    root: Path, repeat: int
+) -> tuple[list[tuple[str, str, Score]], list[tuple[str, str, tuple[float, float, float]]], bool]:
     rows = []
+    ratios = []
     have_cv = True
     for pair in load_pairs(root):
         methods: list[tuple[str, Callable[[], np.ndarray]]] = [("depthpose GCS", ours(pair))]
@@ -182,9 +200,12 @@ def evaluate(root: Path, repeat: int) -> tuple[list[tuple[str, str, Score]], boo
                 break
             methods.append((name, run))
         results = timed([fn for _, fn in methods], repeat)
-        for (name, _), (disp, sec, cpu) in zip(methods, results, strict=True):
-            rows.append((pair.name, name, score(disp, pair.gt, sec, cpu)))
-    return rows, have_cv
+        for (name, _), (disp, wall, cpu) in zip(methods, results, strict=True):
+            rows.append((pair.name, name, score(disp, pair.gt, min(wall), min(cpu))))
+        ours_cpu = results[0][2]
+        for (name, _), (_, _, cpu) in zip(methods[1:], results[1:], strict=True):
+            ratios.append((pair.name, name, paired_ratio(ours_cpu, cpu)))
+    return rows, ratios, have_cv
 
 
 def table(rows: list[tuple[str, str, Score]]) -> str:
@@ -218,8 +239,12 @@ def main(argv: list[str] | None = None) -> int:
             cv2.setNumThreads(args.threads)
         except ImportError:
             pass
-    rows, have_cv = evaluate(args.data, args.repeat)
+    rows, ratios, have_cv = evaluate(args.data, args.repeat)
     print(table(rows))
+    if ratios:
+        print(f"\nCPU time of depthpose GCS over the peer's, run by run ({args.repeat} runs):")
+        for name, method, (med, q1, q3) in ratios:
+            print(f"- {name}, {method}: median {med:.2f}x (quartiles {q1:.2f}-{q3:.2f})")
     if not have_cv:
         print(
             "\nOpenCV is not installed (pip install opencv-python-headless): "

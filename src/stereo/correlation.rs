@@ -56,6 +56,9 @@ fn normalise(img: &mut [f32]) -> bool {
     true
 }
 
+/// Zeros kept after the normalised right image (see `Correlator::cross3_fixed`).
+const RIGHT_SLACK: usize = 4;
+
 /// Rows of moments computed by one task: each task keeps its own running column sums.
 const MOMENT_ROWS: usize = 32;
 
@@ -136,6 +139,9 @@ impl Correlator {
         if !(l_ok && r_ok) {
             return None;
         }
+        // Zeros after the right image: the four-lane window sums read one pixel past
+        // the last window's reach.
+        right.resize(width * height + RIGHT_SLACK, 0.0);
         let min_var = (min_texture * min_texture).max(f32::MIN_POSITIVE);
         let (ml, mr) = rayon::join(
             || moments(&left, width, height, half, min_var),
@@ -280,21 +286,33 @@ impl Correlator {
         }
     }
 
+    /// Four lanes per window pixel, one per right shift: lane k sums L·R at disparity
+    /// d + 1 − k (lane 3 is a spare the vector unit computes for free), so each window
+    /// pixel costs one broadcast, one unaligned load and one multiply-add of four lanes.
+    /// Each row has its own accumulator (short dependency chains), and the rows are
+    /// summed in order afterwards: the same additions in the same order as a scalar
+    /// loop, so the result is bit-identical to it.
     #[inline]
     fn cross3_fixed<const SIDE: usize>(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
         let (w, h) = (self.width, self.half);
-        let mut sums = [0.0f32; 3];
-        for row in y - h..=y + h {
+        let mut rows = [[0.0f32; 4]; SIDE];
+        for (acc, row) in rows.iter_mut().zip(y - h..=y + h) {
             let start = row * w + x - h;
             let l: &[f32; SIDE] = self.left[start..start + SIDE].try_into().expect("SIDE");
-            let r = &self.right[start - d - 1..start - d + 1 + SIDE];
-            for (k, sum) in sums.iter_mut().enumerate() {
-                let rk: &[f32; SIDE] = r[k..k + SIDE].try_into().expect("SIDE");
-                let mut acc = 0.0f32;
-                for i in 0..SIDE {
-                    acc += l[i] * rk[i];
+            // `RIGHT_SLACK` zeros after the image keep the spare lane's load in bounds.
+            let r = &self.right[start - d - 1..start - d + 2 + SIDE];
+            for i in 0..SIDE {
+                let li = l[i];
+                let ri: &[f32; 4] = r[i..i + 4].try_into().expect("4 lanes");
+                for k in 0..4 {
+                    acc[k] += li * ri[k];
                 }
-                *sum += acc;
+            }
+        }
+        let mut sums = [0.0f32; 3];
+        for acc in &rows {
+            for k in 0..3 {
+                sums[k] += acc[k];
             }
         }
         sums
