@@ -21,3 +21,23 @@ pub(crate) fn avx512() -> bool {
         }
     })
 }
+
+/// Whether the AVX2 builds of the stereo window sums may run: the CPU has AVX2 and the
+/// environment variable `DEPTHPOSE_NO_AVX2` is not set (so that tests can compare them
+/// with the portable build). Decided once per process.
+#[inline]
+pub(crate) fn avx2() -> bool {
+    use std::sync::OnceLock;
+    static ALLOWED: OnceLock<bool> = OnceLock::new();
+    *ALLOWED.get_or_init(|| {
+        #[cfg(target_arch = "x86_64")]
+        {
+            std::arch::is_x86_feature_detected!("avx2")
+                && std::env::var_os("DEPTHPOSE_NO_AVX2").is_none()
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            false
+        }
+    })
+}

@@ -38,6 +38,9 @@ pub struct Correlator {
     half: usize,
     inv_n: f32,
     similarity: Similarity,
+    /// Whether the window sums may take the AVX2 build (the CPU has it and
+    /// `DEPTHPOSE_NO_AVX2` is not set).
+    avx2: bool,
 }
 
 /// Shifts and scales `img` in place to mean 0 and standard deviation 1; false (and `img`
@@ -158,6 +161,7 @@ impl Correlator {
             half,
             inv_n: 1.0 / (side * side) as f32,
             similarity,
+            avx2: crate::cpu::avx2(),
         })
     }
 
@@ -277,6 +281,25 @@ impl Correlator {
     /// right window at d + 1 inside the image).
     #[inline]
     fn cross3(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        #[cfg(target_arch = "x86_64")]
+        if self.avx2 {
+            // SAFETY: `avx2` is set only when the CPU has AVX2.
+            return unsafe { self.cross3_avx2(x, y, d) };
+        }
+        self.cross3_portable(x, y, d)
+    }
+
+    /// [`Correlator::cross3_portable`] compiled for AVX2: the broadcast and the multiply
+    /// read memory directly, three instructions per window pixel instead of five. No FMA (Rust never fuses a multiply and an add on its own), so the
+    /// sums are bit-identical to the portable build's.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    unsafe fn cross3_avx2(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
+        self.cross3_portable(x, y, d)
+    }
+
+    #[inline(always)]
+    fn cross3_portable(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
         // Common window sides get fixed-size loops the compiler unrolls and vectorises.
         match self.half {
             1 => self.cross3_fixed::<3>(x, y, d),
@@ -292,12 +315,14 @@ impl Correlator {
     /// Each row has its own accumulator (short dependency chains), and the rows are
     /// summed in order afterwards: the same additions in the same order as a scalar
     /// loop, so the result is bit-identical to it.
-    #[inline]
+    #[inline(always)]
     fn cross3_fixed<const SIDE: usize>(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
         let (w, h) = (self.width, self.half);
         let mut rows = [[0.0f32; 4]; SIDE];
-        for (acc, row) in rows.iter_mut().zip(y - h..=y + h) {
-            let start = row * w + x - h;
+        // Rows by index, not an inclusive range: its exhaustion flag kept the loop
+        // from unrolling.
+        for (j, acc) in rows.iter_mut().enumerate() {
+            let start = (y - h + j) * w + x - h;
             let l: &[f32; SIDE] = self.left[start..start + SIDE].try_into().expect("SIDE");
             // `RIGHT_SLACK` zeros after the image keep the spare lane's load in bounds.
             let r = &self.right[start - d - 1..start - d + 2 + SIDE];
@@ -492,6 +517,26 @@ mod tests {
                             (g - want).abs() < 1e-5,
                             "({x},{y}) d={d} k={k}: {g} vs {want}"
                         );
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn avx2_window_sums_are_bit_identical_to_the_portable_ones() {
+        // On a CPU without AVX2 both calls take the portable build: still a valid test.
+        let (w, h) = (40, 16);
+        let l = noise(w * h, 8);
+        let r = noise(w * h, 9);
+        for half in 1..=4 {
+            let c =
+                Correlator::new(l.clone(), r.clone(), w, h, half, 1e-3, Similarity::Mncc).unwrap();
+            for y in half..h - half {
+                for x in half + 2..w - half {
+                    for d in 1..x - half {
+                        let (a, b) = (c.cross3(x, y, d), c.cross3_portable(x, y, d));
+                        assert_eq!(a.map(f32::to_bits), b.map(f32::to_bits), "({x},{y},{d})");
                     }
                 }
             }
