@@ -26,6 +26,7 @@ pub const QUEUE_LEVELS: usize = 512;
 struct Step {
     /// The match's disparity.
     d: usize,
+    /// The largest disparity considered.
     max_d: usize,
     /// Index of the band's first pixel in the image.
     first: usize,
@@ -400,7 +401,7 @@ impl Grower {
 
 /// Growers kept between calls, so that a stream of frames does not allocate (and fault
 /// in) the per-pixel state and the queue's buckets afresh for every band of every call:
-/// that was 5–10 % of a call's time on the Middlebury pairs.
+/// perf put 5–7 % of a call on the cones pair in that allocation.
 static POOL: Mutex<Vec<Grower>> = Mutex::new(Vec::new());
 
 /// Most bytes of grower storage kept in the pool between calls.
@@ -531,11 +532,13 @@ mod tests {
         fn best_free_matches_a_plain_search(
             scores in proptest::array::uniform3(-2.0f32..1.0),
             used in proptest::array::uniform3(proptest::bool::ANY),
-            tie in 0usize..3,
+            tie in 0usize..4,
         ) {
-            // Ties are drawn on purpose: copy one score over another.
+            // Ties are drawn on purpose: copy one score over another (tie < 3).
             let mut scores = scores;
-            scores[(tie + 1) % 3] = scores[tie];
+            if tie < 3 {
+                scores[(tie + 1) % 3] = scores[tie];
+            }
             let mut want: Option<(usize, f32)> = None;
             for k in 0..3 {
                 if !used[k] && want.is_none_or(|(_, b)| scores[k] > b) {
