@@ -6,9 +6,11 @@
 //! `python` behind the `python` feature; algorithms never live there.
 
 /// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
-/// has it (detected at run time), and the portable build otherwise. The body is an
-/// `#[inline(always)]` inner function, so each variant gets its own code. Same results
-/// either way: Rust does not fuse multiplies and adds on its own.
+/// has it and `DEPTHPOSE_NO_AVX2` is not set ([`cpu::avx2`], decided once per process),
+/// and the portable build otherwise. The body is an `#[inline(always)]` inner function,
+/// so each variant gets its own code. Same results either way: Rust does not fuse
+/// multiplies and adds on its own. Closures in the body (rayon's, for instance) are
+/// functions of their own and do not inherit the AVX2 build: dispatch inside them.
 macro_rules! avx2_dispatch {
     ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
         $(#[$meta])*
@@ -21,8 +23,8 @@ macro_rules! avx2_dispatch {
                 body($($arg),*)
             }
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
+            if $crate::cpu::avx2() {
+                // SAFETY: `cpu::avx2` holds only where the CPU supports AVX2.
                 return unsafe { avx2($($arg),*) };
             }
             body($($arg),*)
