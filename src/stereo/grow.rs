@@ -28,8 +28,6 @@ struct Step {
     d: usize,
     /// The largest disparity considered.
     max_d: usize,
-    /// Index of the band's first pixel in the image.
-    first: usize,
     /// [`order_key`] of the acceptance threshold.
     threshold_key: i32,
 }
@@ -248,6 +246,10 @@ pub struct Grower {
     right_used: Vec<bool>,
     /// Disparity of each left pixel of the band, `NO_MATCH` where none.
     disp: Vec<i16>,
+    /// One bit per left pixel of the band: whether it is matched. The growing tests it
+    /// for every popped candidate and every neighbour; as bits the whole band's flags
+    /// stay in the first-level cache, where `disp` (read only at the end) does not.
+    matched: Vec<u64>,
     cache: Vec<Cache>,
     /// The rows this grower works on: matches never grow out of them. Rows are
     /// independent for uniqueness (epipolar lines), so bands can grow in parallel.
@@ -260,6 +262,7 @@ impl Grower {
             queue: BucketQueue::new(),
             right_used: Vec::new(),
             disp: Vec::new(),
+            matched: Vec::new(),
             cache: Vec::new(),
             rows: 0..0,
         }
@@ -290,6 +293,8 @@ impl Grower {
         self.right_used.resize(n + RIGHT_PAD + 1, false);
         self.disp.clear();
         self.disp.resize(n, NO_MATCH);
+        self.matched.clear();
+        self.matched.resize(n.div_ceil(64), 0);
         self.cache.clear();
         self.cache.resize(n, EMPTY_CACHE);
         self.queue.reset(threshold);
@@ -310,38 +315,53 @@ impl Grower {
 
         while let Some(cand) = self.queue.pop() {
             let (idx, d) = (cand.idx as usize, cand.d as usize);
-            if self.disp[idx] != NO_MATCH || self.right_used[idx - d + RIGHT_PAD] {
+            if self.is_matched(idx) || self.right_used[idx - d + RIGHT_PAD] {
                 continue; // uniqueness: one of the two pixels is taken already
             }
             self.disp[idx] = d as i16;
+            self.matched[idx / 64] |= 1 << (idx % 64);
             self.right_used[idx - d + RIGHT_PAD] = true;
             let (x, y) = (idx % w, rows.start + idx / w);
-            // Four calls rather than a loop over the neighbours: each call's tests get
-            // their own branch history, and the loop's own exit tests go (cachegrind's
-            // branch simulation put 150 k mispredictions per cones call on them).
+            // The popped pixel's window lies inside the image and its row inside the
+            // band (it was queued from a seed or a neighbour that passed these tests), so
+            // each neighbour needs only the one test its step can fail.
+            let half = corr.half();
             let step = Step {
                 d,
                 max_d,
-                first,
                 threshold_key,
             };
-            self.visit(corr, &step, x.wrapping_sub(1), y);
-            self.visit(corr, &step, x + 1, y);
-            self.visit(corr, &step, x, y.wrapping_sub(1));
-            self.visit(corr, &step, x, y + 1);
+            // Four calls rather than a loop over the neighbours: each call's tests get
+            // their own branch history, and the loop's own exit tests go (cachegrind's
+            // branch simulation put 150 k mispredictions per cones call on them).
+            if x > half {
+                self.visit(corr, &step, idx - 1, x - 1, y);
+            }
+            if x + 1 + half < w {
+                self.visit(corr, &step, idx + 1, x + 1, y);
+            }
+            if y > half.max(rows.start) {
+                self.visit(corr, &step, idx - w, x, y - 1);
+            }
+            if y + 1 + half < corr.height() && y + 1 < rows.end {
+                self.visit(corr, &step, idx + w, x, y + 1);
+            }
         }
     }
 
-    /// Growing from a match at disparity `step.d` into its neighbour (nx, ny): the best
-    /// free one of d − 1, d, d + 1 there is queued if it passes the threshold.
+    /// Whether pixel `idx` of the band is matched.
     #[inline(always)]
-    fn visit(&mut self, corr: &Correlator, step: &Step, nx: usize, ny: usize) {
+    fn is_matched(&self, idx: usize) -> bool {
+        (self.matched[idx / 64] >> (idx % 64)) & 1 != 0
+    }
+
+    /// Growing from a match at disparity `step.d` into its neighbour (nx, ny), pixel
+    /// `nidx` of the band, whose window lies inside the image: the best free one of
+    /// d − 1, d, d + 1 there is queued if it passes the threshold.
+    #[inline(always)]
+    fn visit(&mut self, corr: &Correlator, step: &Step, nidx: usize, nx: usize, ny: usize) {
         let d = step.d;
-        if !corr.inside(nx, ny) || !self.rows.contains(&ny) {
-            return;
-        }
-        let nidx = ny * corr.width() + nx - step.first;
-        if self.disp[nidx] != NO_MATCH {
+        if self.is_matched(nidx) {
             return;
         }
         let cell = &mut self.cache[nidx];
@@ -434,6 +454,7 @@ impl Grower {
         use std::mem::size_of;
         self.right_used.capacity() * size_of::<bool>()
             + self.disp.capacity() * size_of::<i16>()
+            + self.matched.capacity() * size_of::<u64>()
             + self.cache.capacity() * size_of::<Cache>()
             + self
                 .queue

@@ -477,38 +477,38 @@ fn fill_gaps(disp: &mut [i32], corr: &Correlator, max_d: usize, threshold: f32) 
 fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size: usize) {
     let n = width * height;
     let mut label = vec![u32::MAX; n];
-    let mut stack = Vec::new();
+    // Pixels to visit with their column (so that no division recovers it).
+    let mut stack: Vec<(usize, usize)> = Vec::new();
     let mut members = Vec::new();
     for start in 0..n {
         if disp[start] == UNMATCHED || label[start] != u32::MAX {
             continue;
         }
         label[start] = start as u32;
-        stack.push(start);
+        stack.push((start, start % width));
         members.clear();
-        while let Some(i) = stack.pop() {
+        while let Some((i, x)) = stack.pop() {
             members.push(i);
-            let (x, y) = (i % width, i / width);
-            let mut visit = |j: usize| {
+            let mut visit = |j: usize, xj: usize| {
                 if disp[j] != UNMATCHED
                     && label[j] == u32::MAX
                     && (disp[j] - disp[i]).abs() <= SEGMENT_STEP
                 {
                     label[j] = start as u32;
-                    stack.push(j);
+                    stack.push((j, xj));
                 }
             };
             if x > 0 {
-                visit(i - 1);
+                visit(i - 1, x - 1);
             }
             if x + 1 < width {
-                visit(i + 1);
+                visit(i + 1, x + 1);
             }
-            if y > 0 {
-                visit(i - width);
+            if i >= width {
+                visit(i - width, x);
             }
-            if y + 1 < height {
-                visit(i + width);
+            if i + width < n {
+                visit(i + width, x);
             }
         }
         if members.len() < min_size {
