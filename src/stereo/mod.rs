@@ -474,47 +474,76 @@ fn fill_gaps(disp: &mut [i32], corr: &Correlator, max_d: usize, threshold: f32) 
 
 /// Unmatches 4-connected segments (neighbour disparities within `SEGMENT_STEP`) of
 /// fewer than `min_size` pixels.
+///
+/// By runs rather than by a flood fill: each row is cut into runs of matched pixels
+/// joined left to right, runs of consecutive rows are merged (union–find) where any
+/// column they share joins them vertically, and the runs of small segments are cleared.
+/// Every pass reads the map in order; the flood fill's stack and its per-pixel labels
+/// jumped between rows and took ≈ 7 % of a call on the cones pair.
 fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size: usize) {
-    let n = width * height;
-    let mut label = vec![u32::MAX; n];
-    // Pixels to visit with their column (so that no division recovers it).
-    let mut stack: Vec<(usize, usize)> = Vec::new();
-    let mut members = Vec::new();
-    for start in 0..n {
-        if disp[start] == UNMATCHED || label[start] != u32::MAX {
-            continue;
+    let joined = |a: i32, b: i32| a != UNMATCHED && b != UNMATCHED && (a - b).abs() <= SEGMENT_STEP;
+    // Runs as [start, end) pixel indices, row by row; `row_runs[y]..row_runs[y + 1]`
+    // are row y's.
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut row_runs = Vec::with_capacity(height + 1);
+    for y in 0..height {
+        row_runs.push(runs.len());
+        let row = &disp[y * width..][..width];
+        let mut x = 0;
+        while x < width {
+            if row[x] == UNMATCHED {
+                x += 1;
+                continue;
+            }
+            let start = x;
+            x += 1;
+            while x < width && joined(row[x - 1], row[x]) {
+                x += 1;
+            }
+            runs.push((y * width + start, y * width + x));
         }
-        label[start] = start as u32;
-        stack.push((start, start % width));
-        members.clear();
-        while let Some((i, x)) = stack.pop() {
-            members.push(i);
-            let mut visit = |j: usize, xj: usize| {
-                if disp[j] != UNMATCHED
-                    && label[j] == u32::MAX
-                    && (disp[j] - disp[i]).abs() <= SEGMENT_STEP
+    }
+    row_runs.push(runs.len());
+
+    let mut parent: Vec<u32> = (0..runs.len() as u32).collect();
+    fn root(parent: &mut [u32], mut r: u32) -> u32 {
+        while parent[r as usize] != r {
+            let up = parent[parent[r as usize] as usize];
+            parent[r as usize] = up; // path halving
+            r = up;
+        }
+        r
+    }
+    for y in 1..height {
+        // Sweep the runs of rows y − 1 and y together, by column.
+        let (mut a, a_end) = (row_runs[y - 1], row_runs[y]);
+        let (mut b, b_end) = (row_runs[y], row_runs[y + 1]);
+        while a < a_end && b < b_end {
+            let (a_start, a_stop) = (runs[a].0 - (y - 1) * width, runs[a].1 - (y - 1) * width);
+            let (b_start, b_stop) = (runs[b].0 - y * width, runs[b].1 - y * width);
+            let (lo, hi) = (a_start.max(b_start), a_stop.min(b_stop));
+            if lo < hi {
+                let (ra, rb) = (root(&mut parent, a as u32), root(&mut parent, b as u32));
+                if ra != rb
+                    && (lo..hi).any(|x| joined(disp[(y - 1) * width + x], disp[y * width + x]))
                 {
-                    label[j] = start as u32;
-                    stack.push((j, xj));
+                    parent[ra.max(rb) as usize] = ra.min(rb);
                 }
-            };
-            if x > 0 {
-                visit(i - 1, x - 1);
             }
-            if x + 1 < width {
-                visit(i + 1, x + 1);
-            }
-            if i >= width {
-                visit(i - width, x);
-            }
-            if i + width < n {
-                visit(i + width, x);
+            if a_stop <= b_stop {
+                a += 1;
+            } else {
+                b += 1;
             }
         }
-        if members.len() < min_size {
-            for &i in &members {
-                disp[i] = UNMATCHED;
-            }
+    }
+    let mut size = vec![0usize; runs.len()];
+    for (r, &(start, end)) in runs.iter().enumerate() {
+        size[root(&mut parent, r as u32) as usize] += end - start;
+    }
+    for (r, &(start, end)) in runs.iter().enumerate() {
+        if size[root(&mut parent, r as u32) as usize] < min_size {
+            disp[start..end].fill(UNMATCHED);
         }
     }
 }

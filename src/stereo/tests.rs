@@ -434,6 +434,70 @@ fn gray_uses_luma_weights() {
     assert!((g[2] - 10.0).abs() < 1e-4);
 }
 
+/// The plain definition of the segment filter, a flood fill from every matched pixel:
+/// the reference of `runs_remove_the_same_segments_as_a_flood_fill`.
+fn remove_small_segments_by_flood_fill(
+    disp: &mut [i32],
+    width: usize,
+    height: usize,
+    min_size: usize,
+) {
+    let n = width * height;
+    let mut seen = vec![false; n];
+    for start in 0..n {
+        if disp[start] == UNMATCHED || seen[start] {
+            continue;
+        }
+        seen[start] = true;
+        let (mut stack, mut members) = (vec![start], Vec::new());
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            let (x, y) = (i % width, i / width);
+            let neighbours = [
+                (x > 0).then(|| i - 1),
+                (x + 1 < width).then(|| i + 1),
+                (y > 0).then(|| i - width),
+                (y + 1 < height).then(|| i + width),
+            ];
+            for j in neighbours.into_iter().flatten() {
+                if disp[j] != UNMATCHED && !seen[j] && (disp[j] - disp[i]).abs() <= SEGMENT_STEP {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+        if members.len() < min_size {
+            for i in members {
+                disp[i] = UNMATCHED;
+            }
+        }
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+    /// Random maps of few disparities and many holes: long, winding segments that join
+    /// and split between rows, the cases a run-based filter can get wrong.
+    #[test]
+    fn runs_remove_the_same_segments_as_a_flood_fill(
+        seed in 0u64..1_000_000,
+        width in 1usize..40,
+        height in 1usize..30,
+        holes in 0u64..60,
+        levels in 1u64..6,
+        min_size in 0usize..40,
+    ) {
+        let mut rng = SplitMix64::new(seed);
+        let mut disp: Vec<i32> = (0..width * height)
+            .map(|_| if rng.below(100) < holes as usize { UNMATCHED } else { rng.below(levels as usize) as i32 })
+            .collect();
+        let mut want = disp.clone();
+        remove_small_segments_by_flood_fill(&mut want, width, height, min_size);
+        remove_small_segments(&mut disp, width, height, min_size);
+        prop_assert_eq!(disp, want);
+    }
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(16))]
     /// On any textured pair: matches are one-to-one, inside the disparity bound, and
