@@ -176,16 +176,14 @@ fn check_image(img: &[f32], height: usize, width: usize, name: &str) -> Result<(
     let all_finite = img
         .chunks(256)
         .all(|block| block.iter().fold(true, |ok, v| ok & v.is_finite()));
-    if let Some(i) = (!all_finite)
-        .then(|| img.iter().position(|v| !v.is_finite()))
-        .flatten()
-    {
-        return Err(Error::invalid(
-            name,
-            format!("holds a non-finite value ({}) at pixel {i}", img[i]),
-        ));
+    if all_finite {
+        return Ok(());
     }
-    Ok(())
+    let i = img.iter().position(|v| !v.is_finite()).unwrap_or(0);
+    Err(Error::invalid(
+        name,
+        format!("holds a non-finite value ({}) at pixel {i}", img[i]),
+    ))
 }
 
 /// Gray from interleaved RGB (H·W·3), by the Rec. 601 luma weights.
