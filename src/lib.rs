@@ -45,6 +45,7 @@ pub mod io;
 pub mod render;
 pub mod stereo;
 pub mod templates;
+mod union_find;
 
 #[cfg(feature = "python")]
 mod python;

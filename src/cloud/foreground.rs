@@ -9,6 +9,7 @@
 
 use super::DepthView;
 use crate::error::{ensure, Error, Result};
+use crate::union_find::UnionFind;
 
 /// Settings of [`foreground_mask`].
 #[derive(Debug, Clone, Copy)]
@@ -350,48 +351,6 @@ impl Components {
             }
         }
         keep
-    }
-}
-
-/// Disjoint sets (of provisional component labels) with path halving and union by size.
-#[derive(Default)]
-struct UnionFind {
-    parent: Vec<u32>,
-    size: Vec<u32>,
-}
-
-impl UnionFind {
-    /// A new singleton set; returns its element.
-    fn push(&mut self) -> usize {
-        let x = self.parent.len();
-        self.parent.push(x as u32);
-        self.size.push(1);
-        x
-    }
-
-    fn len(&self) -> usize {
-        self.parent.len()
-    }
-
-    fn find(&mut self, mut x: usize) -> usize {
-        while self.parent[x] as usize != x {
-            let p = self.parent[x] as usize;
-            self.parent[x] = self.parent[p];
-            x = self.parent[x] as usize;
-        }
-        x
-    }
-
-    fn union(&mut self, a: usize, b: usize) {
-        let (mut a, mut b) = (self.find(a), self.find(b));
-        if a == b {
-            return;
-        }
-        if self.size[a] < self.size[b] {
-            std::mem::swap(&mut a, &mut b);
-        }
-        self.parent[b] = a as u32;
-        self.size[a] += self.size[b];
     }
 }
 

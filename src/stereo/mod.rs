@@ -18,6 +18,7 @@ mod grow;
 pub use correlation::Similarity;
 
 use crate::error::{ensure, Error, Result};
+use crate::union_find::UnionFind;
 use correlation::{Correlator, NO_CORRELATION};
 use grow::{random_seeds, Grower, SplitMix64, DISPARITY_LIMIT, UNMATCHED};
 use rayon::prelude::*;
@@ -484,6 +485,8 @@ fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size
     // are row y's.
     let mut runs: Vec<(usize, usize)> = Vec::new();
     let mut row_runs = Vec::with_capacity(height + 1);
+    // One set per run, merged below where runs of consecutive rows join.
+    let mut sets = UnionFind::default();
     for y in 0..height {
         row_runs.push(runs.len());
         let row = &disp[y * width..][..width];
@@ -499,19 +502,11 @@ fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size
                 x += 1;
             }
             runs.push((y * width + start, y * width + x));
+            sets.push();
         }
     }
     row_runs.push(runs.len());
 
-    let mut parent: Vec<u32> = (0..runs.len() as u32).collect();
-    fn root(parent: &mut [u32], mut r: u32) -> u32 {
-        while parent[r as usize] != r {
-            let up = parent[parent[r as usize] as usize];
-            parent[r as usize] = up; // path halving
-            r = up;
-        }
-        r
-    }
     for y in 1..height {
         // Sweep the runs of rows y − 1 and y together, by column.
         let (mut a, a_end) = (row_runs[y - 1], row_runs[y]);
@@ -520,13 +515,11 @@ fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size
             let (a_start, a_stop) = (runs[a].0 - (y - 1) * width, runs[a].1 - (y - 1) * width);
             let (b_start, b_stop) = (runs[b].0 - y * width, runs[b].1 - y * width);
             let (lo, hi) = (a_start.max(b_start), a_stop.min(b_stop));
-            if lo < hi {
-                let (ra, rb) = (root(&mut parent, a as u32), root(&mut parent, b as u32));
-                if ra != rb
-                    && (lo..hi).any(|x| joined(disp[(y - 1) * width + x], disp[y * width + x]))
-                {
-                    parent[ra.max(rb) as usize] = ra.min(rb);
-                }
+            if lo < hi
+                && sets.find(a) != sets.find(b)
+                && (lo..hi).any(|x| joined(disp[(y - 1) * width + x], disp[y * width + x]))
+            {
+                sets.union(a, b);
             }
             if a_stop <= b_stop {
                 a += 1;
@@ -537,10 +530,10 @@ fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size
     }
     let mut size = vec![0usize; runs.len()];
     for (r, &(start, end)) in runs.iter().enumerate() {
-        size[root(&mut parent, r as u32) as usize] += end - start;
+        size[sets.find(r)] += end - start;
     }
     for (r, &(start, end)) in runs.iter().enumerate() {
-        if size[root(&mut parent, r as u32) as usize] < min_size {
+        if size[sets.find(r)] < min_size {
             disp[start..end].fill(UNMATCHED);
         }
     }
