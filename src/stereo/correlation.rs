@@ -39,7 +39,7 @@ pub struct Correlator {
     half: usize,
     inv_n: f32,
     similarity: Similarity,
-    /// Whether the window sums may take the AVX2 build (the CPU has it and
+    /// Whether `score3` and `score_line` may take their AVX2 builds (the CPU has it and
     /// `DEPTHPOSE_NO_AVX2` is not set).
     avx2: bool,
 }
@@ -60,7 +60,7 @@ fn normalise(img: &mut [f32]) -> bool {
     true
 }
 
-/// Zeros kept after the normalised right image (see `Correlator::cross3_fixed`).
+/// Zeros kept after the normalised right image (the spare lane of [`window_sums`] reads past the last window).
 const RIGHT_SLACK: usize = 4;
 
 /// Rows of moments computed by one task: each task keeps its own running column sums.
@@ -341,12 +341,8 @@ impl Correlator {
         }
     }
 
-    /// Four lanes per window pixel, one per right shift: lane k sums L·R at disparity
-    /// d + 1 − k (lane 3 is a spare the vector unit computes for free), so each window
-    /// pixel costs one broadcast, one unaligned load and one multiply-add of four lanes.
-    /// Each row has its own accumulator (short dependency chains), and the rows are
-    /// summed in order afterwards: the same additions in the same order as a scalar
-    /// loop, so the result is bit-identical to it.
+    /// The window sums of a fixed window side by [`window_sums`] (lane k: disparity
+    /// d + 1 − k), after one range test for the whole window.
     #[inline(always)]
     fn cross3_fixed<const SIDE: usize>(&self, x: usize, y: usize, d: usize) -> [f32; 3] {
         let w = self.width;
