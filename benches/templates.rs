@@ -100,6 +100,11 @@ fn bench(c: &mut Criterion) {
     c.bench_function("match_768_templates_320x240", |b| {
         b.iter(|| black_box(db.match_depth(&view, &cam, None, &mc).unwrap()))
     });
+    // The same with the best ten re-ranked by their placed fit energy (`rerank`).
+    let rerank = MatchConfig { rerank: 10, ..mc };
+    c.bench_function("match_768_templates_320x240_rerank10", |b| {
+        b.iter(|| black_box(db.match_depth(&view, &cam, None, &rerank).unwrap()))
+    });
     let sil = Silhouette::from_depth(&view, &cam, None, dc.normal_radius).unwrap();
     let q = sil.surface_context(&dc).unwrap();
     c.bench_function("exact_assignment_one_template", |b| {

@@ -319,6 +319,13 @@ pub struct MatchConfig {
     pub location_weight: f64,
     /// Cost of leaving a sample unmatched.
     pub dummy_cost: f64,
+    /// Re-rank the exact stage's best this-many templates (0 or 1 = off; at most the
+    /// short list counts) by how well each, placed at the observed body, explains the
+    /// depth in 3-D: the fit's data and free-space terms at the placed pose (see
+    /// [`TemplateDatabase::match_depth`]). Off by default: it costs about 0.25 ms per
+    /// candidate and improves the placed pose, not the fit that follows
+    /// (docs/templates.md).
+    pub rerank: usize,
 }
 
 impl Default for MatchConfig {
@@ -329,6 +336,7 @@ impl Default for MatchConfig {
             representatives: 8,
             location_weight: 0.1,
             dummy_cost: 0.15,
+            rerank: 0,
         }
     }
 }
@@ -351,7 +359,10 @@ impl MatchConfig {
             "location_weight",
             || format!("must be finite and >= 0, got {}", self.location_weight),
         )?;
-        crate::error::ensure_positive(self.dummy_cost, "dummy_cost")
+        crate::error::ensure_positive(self.dummy_cost, "dummy_cost")?;
+        ensure(self.rerank <= NUM_TEMPLATES, "rerank", || {
+            format!("must be in 0..={NUM_TEMPLATES}, got {}", self.rerank)
+        })
     }
 }
 
@@ -391,6 +402,10 @@ pub struct TemplateDatabase {
     /// made.
     prune: PruneIndex,
 }
+
+/// The re-ranking ([`MatchConfig::rerank`]) scores every this-many-th observed point
+/// (in pixel order): 2,000 of a typical 8,000-point body.
+const RERANK_POINT_STEP: usize = 4;
 
 /// Principal directions kept for the pruning stage's lower bound.
 const PRUNE_DIRECTIONS: usize = 32;
@@ -681,7 +696,11 @@ impl TemplateDatabase {
         self.templates.is_empty()
     }
 
-    /// Matches the (masked) body of a depth image against every template.
+    /// Matches the (masked) body of a depth image against every template: pruning, the
+    /// exact assignment on the short list, each candidate placed at the observed body,
+    /// and with [`MatchConfig::rerank`] the best few re-ordered by their placed fit
+    /// energy (which sees depth the normals-only descriptor cannot: an arm held toward
+    /// the camera against one hanging in front of the body).
     pub fn match_depth(
         &self,
         depth: &DepthView,
@@ -693,11 +712,39 @@ impl TemplateDatabase {
         let d = &self.config.descriptor;
         let sil = Silhouette::from_depth(depth, camera, mask, d.normal_radius)?;
         let query = sil.surface_context(d)?;
-        let mut result = self.match_context(&query, config)?;
+        let rerank = config.rerank.min(config.shortlist);
+        let wide = MatchConfig {
+            top_k: config.top_k.max(rerank),
+            ..*config
+        };
+        let mut result = self.match_context(&query, &wide)?;
         let size = metric_size(&query, &sil.centroid, camera);
         for c in result.candidates.iter_mut() {
             self.place(c, &sil, size);
         }
+        if rerank > 1 {
+            // The placed candidates' fit energy against every RERANK_POINT_STEP-th point.
+            let cloud = crate::cloud::Cloud::from_depth(depth, camera, mask)?;
+            let points: Vec<[f32; 3]> = cloud
+                .points
+                .iter()
+                .step_by(RERANK_POINT_STEP)
+                .copied()
+                .collect();
+            let n = result.candidates.len().min(rerank);
+            let energies: Vec<f64> = result.candidates[..n]
+                .iter()
+                .map(|c| self.placed_energy(&points, depth.data, camera, &c.pose))
+                .collect();
+            let mut order: Vec<usize> = (0..n).collect();
+            order.sort_by(|&a, &b| energies[a].total_cmp(&energies[b]).then(a.cmp(&b)));
+            let reordered: Vec<Candidate> = order
+                .iter()
+                .map(|&k| result.candidates[k].clone())
+                .collect();
+            result.candidates.splice(..n, reordered);
+        }
+        result.candidates.truncate(config.top_k);
         Ok(result)
     }
 
@@ -807,6 +854,45 @@ impl TemplateDatabase {
             candidates,
             shortlist,
         })
+    }
+
+    /// How well `pose` explains the observed `points` (a sub-sample of the body's) and
+    /// the free space of `depth`: the data terms of the fit's energy (default
+    /// [`crate::fit::em::EmConfig`], outlier distance at its starting value) with every
+    /// point at its cheapest label, pairwise terms left out, per point.
+    fn placed_energy(
+        &self,
+        points: &[[f32; 3]],
+        depth: &[f32],
+        camera: &Camera,
+        pose: &Pose,
+    ) -> f64 {
+        use crate::fit::em::{unary_costs, EmConfig, NUM_LABELS};
+        use crate::fit::free_space::FreeSpaceTerm;
+        let cfg = EmConfig::default();
+        let mut unary = vec![0.0; points.len() * NUM_LABELS];
+        unary_costs(
+            &self.model,
+            points,
+            pose,
+            &cfg,
+            cfg.outlier_distance_start,
+            &mut unary,
+        );
+        let data: f64 = unary
+            .chunks_exact(NUM_LABELS)
+            .map(|row| row.iter().copied().fold(f64::INFINITY, f64::min))
+            .sum();
+        // The free-space samples weigh against the full point set: its weight shrinks
+        // with the points kept (1 / step), as a strided fit's does (1 / stride²).
+        let weight_scale = 1.0 / RERANK_POINT_STEP as f64;
+        let free_space = FreeSpaceTerm::new(
+            &self.model,
+            depth,
+            camera,
+            cfg.free_space_cost(weight_scale),
+        );
+        (data + free_space.cost(pose)) / points.len().max(1) as f64
     }
 
     /// Moves a candidate's template onto the observed body: the template's visible
@@ -1892,6 +1978,102 @@ mod tests {
         assert!(mean > 0.7, "projected share of squared distance {mean}");
     }
 
+    /// The re-ranking re-orders the exact stage's best `rerank` candidates by their
+    /// placed energy and nothing else; on perturbed front-view renders (where the
+    /// normals cannot tell an arm toward the camera from one hanging down) its first
+    /// candidates' joints lie nearer the truth than the descriptors' own.
+    #[test]
+    fn rerank_orders_the_best_candidates_by_their_placed_energy() {
+        let db = super::eval::database();
+        let cam = Camera::itop();
+        let mut rng = super::eval::Rng(7);
+        let truncated = |c: MatchConfig| MatchConfig { top_k: 10, ..c };
+        let plain_cfg = truncated(MatchConfig::default());
+        let rerank_cfg = MatchConfig {
+            rerank: 10,
+            ..plain_cfg
+        };
+        let (mut err_plain, mut err_rerank) = (0.0, 0.0);
+        let queries = 12;
+        for q in 0..queries {
+            // Front views: templates 0..256.
+            let t = (rng.uniform() * 256.0) as usize;
+            let (d, pose) = super::eval::query(t, &mut rng, &cam, 0.1);
+            let view = DepthView::new(&d, cam.height, cam.width, "depth").unwrap();
+            let plain = db.match_depth(&view, &cam, None, &plain_cfg).unwrap();
+            let rr = db.match_depth(&view, &cam, None, &rerank_cfg).unwrap();
+            // A permutation of the same ten, the short list untouched.
+            let mut a: Vec<usize> = plain.candidates.iter().map(|c| c.index).collect();
+            let mut b: Vec<usize> = rr.candidates.iter().map(|c| c.index).collect();
+            assert_eq!(plain.shortlist, rr.shortlist);
+            if q == 0 {
+                assert_ne!(a, b, "the first query's order should change");
+            }
+            a.sort_unstable();
+            b.sort_unstable();
+            assert_eq!(a, b);
+            // In ascending placed energy.
+            let cloud = crate::cloud::Cloud::from_depth(&view, &cam, None).unwrap();
+            let pts: Vec<[f32; 3]> = cloud
+                .points
+                .iter()
+                .step_by(RERANK_POINT_STEP)
+                .copied()
+                .collect();
+            let energies: Vec<f64> = rr
+                .candidates
+                .iter()
+                .map(|c| db.placed_energy(&pts, &d, &cam, &c.pose))
+                .collect();
+            assert!(energies.windows(2).all(|w| w[0] <= w[1]), "{energies:?}");
+            // A shorter list is the head of the re-ranked one; rerank 0 and 1 are off.
+            let head = db
+                .match_depth(
+                    &view,
+                    &cam,
+                    None,
+                    &MatchConfig {
+                        top_k: 3,
+                        ..rerank_cfg
+                    },
+                )
+                .unwrap();
+            assert_eq!(head.candidates[..], rr.candidates[..3]);
+            for off in [0, 1] {
+                let same = db
+                    .match_depth(
+                        &view,
+                        &cam,
+                        None,
+                        &MatchConfig {
+                            rerank: off,
+                            ..plain_cfg
+                        },
+                    )
+                    .unwrap();
+                assert_eq!(same, plain);
+            }
+            let truth = db.model.joints(&pose);
+            let err = |c: &Candidate| {
+                c.joints
+                    .iter()
+                    .zip(&truth)
+                    .map(|(j, t)| (Vector3::from(*j) - t).norm())
+                    .sum::<f64>()
+                    / NUM_JOINTS as f64
+            };
+            err_plain += err(&plain.candidates[0]) / queries as f64;
+            err_rerank += err(&rr.candidates[0]) / queries as f64;
+        }
+        eprintln!("mean joint error of the first candidate: descriptors {err_plain:.4} m, re-ranked {err_rerank:.4} m");
+        assert!(err_rerank < err_plain, "{err_rerank} vs {err_plain}");
+        let bad = MatchConfig {
+            rerank: NUM_TEMPLATES + 1,
+            ..plain_cfg
+        };
+        assert!(bad.validate().is_err());
+    }
+
     #[test]
     fn hash_depends_on_model_and_settings() {
         let m = BodyModel::default();
@@ -2008,7 +2190,10 @@ mod eval {
         let db = database();
         let cam = Camera::itop();
         let mut rng = Rng(42);
-        let n = 60;
+        let n = std::env::var("EVAL_N")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(60usize);
         let (mut top1, mut top10, mut joints_ok, mut top1_tied) = (0, 0, 0, 0);
         const TIE: f64 = 1e-9;
         let env = |k: &str, d: f64| {
@@ -2022,6 +2207,7 @@ mod eval {
             top_k: 10,
             location_weight: env("EVAL_LW", base.location_weight),
             dummy_cost: env("EVAL_DUMMY", base.dummy_cost),
+            rerank: env("EVAL_RERANK", base.rerank as f64) as usize,
             ..base
         };
         for _ in 0..n {

@@ -165,6 +165,7 @@ class _TemplateDatabase:
         representatives: int = 8,
         location_weight: float = 0.1,
         dummy_cost: float = 0.15,
+        rerank: int = 0,
     ) -> tuple[list[dict[str, Any]], list[int]]: ...
     def exact_costs(
         self,

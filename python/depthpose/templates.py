@@ -223,9 +223,16 @@ class TemplateDatabase:
         representatives: int = 8,
         location_weight: float = 0.1,
         dummy_cost: float = 0.15,
+        rerank: int = 0,
     ) -> list[Candidate]:
         """Best ``top_k`` templates for the body in ``depth`` (H, W) float32 metres, each
-        with its pose placed at the observed body."""
+        with its pose placed at the observed body.
+
+        ``rerank=R`` (0 = off) re-orders the exact stage's best ``R`` candidates by how
+        well each placed pose explains the depth in 3-D (the fit's data and free-space
+        terms): a better first candidate (own-model top-1 57 → 69 %, placed PCK@10cm on
+        the shared sequences 0.36 → 0.39 with ``R=10``) for about 0.22 ms per candidate.
+        ``R`` is capped at ``shortlist``. See docs/templates.md."""
         found, _ = self._db.match_depth(
             depth,
             camera,
@@ -235,6 +242,7 @@ class TemplateDatabase:
             representatives=representatives,
             location_weight=location_weight,
             dummy_cost=dummy_cost,
+            rerank=rerank,
         )
         return [Candidate(**c) for c in found]
 

@@ -311,7 +311,7 @@ impl PyTemplateDatabase {
     /// index, view, pose (22,), joints (15, 3), cost, prune_cost, scale; and the short
     /// list of the pruning stage.
     #[pyo3(signature = (depth, camera, mask=None, *, top_k=5, shortlist=16, representatives=8,
-                        location_weight=0.1, dummy_cost=0.15))]
+                        location_weight=0.1, dummy_cost=0.15, rerank=0))]
     #[allow(clippy::too_many_arguments)]
     fn match_depth<'py>(
         &self,
@@ -324,8 +324,10 @@ impl PyTemplateDatabase {
         representatives: i128,
         location_weight: f64,
         dummy_cost: f64,
+        rerank: i128,
     ) -> PyResult<(Vec<Bound<'py, PyDict>>, Vec<usize>)> {
         let top_k = count(top_k, "top_k")?;
+        let rerank = count(rerank, "rerank")?;
         let shortlist = count(shortlist, "shortlist")?;
         let representatives = count(representatives, "representatives")?;
         let d = depth_array(depth, "depth")?;
@@ -339,6 +341,7 @@ impl PyTemplateDatabase {
             representatives,
             location_weight,
             dummy_cost,
+            rerank,
         };
         let r = py.detach(|| -> crate::Result<_> {
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
