@@ -346,6 +346,10 @@ impl MatchConfig {
         ensure((1..=NUM_TEMPLATES).contains(&self.top_k), "top_k", || {
             format!("must be in 1..={NUM_TEMPLATES}, got {}", self.top_k)
         })?;
+        // Before the short list, which the Python layer grows to `rerank`.
+        ensure(self.rerank <= NUM_TEMPLATES, "rerank", || {
+            format!("must be in 0..={NUM_TEMPLATES}, got {}", self.rerank)
+        })?;
         ensure(
             (1..=NUM_TEMPLATES).contains(&self.shortlist),
             "shortlist",
@@ -359,10 +363,7 @@ impl MatchConfig {
             "location_weight",
             || format!("must be finite and >= 0, got {}", self.location_weight),
         )?;
-        crate::error::ensure_positive(self.dummy_cost, "dummy_cost")?;
-        ensure(self.rerank <= NUM_TEMPLATES, "rerank", || {
-            format!("must be in 0..={NUM_TEMPLATES}, got {}", self.rerank)
-        })
+        crate::error::ensure_positive(self.dummy_cost, "dummy_cost")
     }
 }
 

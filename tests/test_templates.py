@@ -206,6 +206,18 @@ def test_initial_pose_on_synthetic_front_walk(db):
     assert np.mean(ok) > 0.6
 
 
+def test_rerank_grows_the_short_list_and_keeps_the_candidates(db):
+    """The short list grows to ``rerank`` as it does to ``top_k``; the re-ranked
+    candidates are a permutation of the descriptors' best ``rerank``."""
+    depth = _raycast(70, SMALL)
+    found, short = db.match_with_shortlist(depth, SMALL, top_k=3, rerank=20)
+    assert len(found) == 3 and len(short) == 20
+    plain = db.match(depth, SMALL, top_k=20, shortlist=20)
+    reranked = db.match(depth, SMALL, top_k=20, rerank=20)
+    assert sorted(c.index for c in plain) == sorted(c.index for c in reranked)
+    assert [c.index for c in reranked[:3]] == [c.index for c in found]
+
+
 @pytest.mark.skipif(not SYNTH.is_dir(), reason="shared synthetic data not found")
 def test_rerank_improves_the_placed_pose_on_synthetic_walks(db):
     """``rerank`` re-orders the exact stage's best candidates by their placed fit

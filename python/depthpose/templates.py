@@ -232,7 +232,7 @@ class TemplateDatabase:
         well each placed pose explains the depth in 3-D (the fit's data and free-space
         terms): a better first candidate (own-model top-1 57 → 69 %, placed PCK@10cm on
         the shared sequences 0.36 → 0.39 with ``R=10``) for about 0.22 ms per candidate.
-        ``R`` is capped at ``shortlist``. See docs/templates.md."""
+        The short list grows to ``max(shortlist, top_k, R)``. See docs/templates.md."""
         found, _ = self._db.match_depth(
             depth,
             camera,

@@ -337,7 +337,7 @@ impl PyTemplateDatabase {
         let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
         let cfg = MatchConfig {
             top_k,
-            shortlist: shortlist.max(top_k),
+            shortlist: shortlist.max(top_k).max(rerank),
             representatives,
             location_weight,
             dummy_cost,
