@@ -408,6 +408,17 @@ pub struct TemplateDatabase {
 /// (in pixel order): 2,000 of a typical 8,000-point body.
 const RERANK_POINT_STEP: usize = 4;
 
+/// The points the re-ranking scores: every [`RERANK_POINT_STEP`]-th point of the body
+/// the descriptors saw.
+fn rerank_points(sil: &Silhouette) -> Vec<[f32; 3]> {
+    sil.cloud
+        .points
+        .iter()
+        .step_by(RERANK_POINT_STEP)
+        .copied()
+        .collect()
+}
+
 /// Principal directions kept for the pruning stage's lower bound.
 const PRUNE_DIRECTIONS: usize = 32;
 /// Every this-many-th template sample goes into the principal-direction estimate.
@@ -724,15 +735,7 @@ impl TemplateDatabase {
             self.place(c, &sil, size);
         }
         if rerank > 1 {
-            // The placed candidates' fit energy against every RERANK_POINT_STEP-th point
-            // of the body the descriptors saw.
-            let points: Vec<[f32; 3]> = sil
-                .cloud
-                .points
-                .iter()
-                .step_by(RERANK_POINT_STEP)
-                .copied()
-                .collect();
+            let points = rerank_points(&sil);
             let n = result.candidates.len().min(rerank);
             let energies: Vec<f64> = result.candidates[..n]
                 .iter()
@@ -2017,13 +2020,7 @@ mod tests {
             // In ascending placed energy.
             let dc = &db.config.descriptor;
             let sil = Silhouette::from_depth(&view, &cam, None, dc.normal_radius).unwrap();
-            let pts: Vec<[f32; 3]> = sil
-                .cloud
-                .points
-                .iter()
-                .step_by(RERANK_POINT_STEP)
-                .copied()
-                .collect();
+            let pts = rerank_points(&sil);
             let energies: Vec<f64> = rr
                 .candidates
                 .iter()
