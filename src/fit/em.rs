@@ -768,9 +768,29 @@ pub struct EmResume<'a> {
 /// E-step. Continuing a run that stopped at its iteration limit gives the run that
 /// would have gone on. With `free_space` (the depth image the points came from) and a
 /// positive [`EmConfig::free_space_weight`], the M-step and the energy include the
-/// free-space term ([`super::free_space`]).
+/// free-space term ([`super::free_space`]). Runs on a worker of rayon's pool
+/// ([`crate::pool::on_worker`]).
 #[allow(clippy::too_many_arguments)]
 pub fn hard_em_from(
+    model: &BodyModel,
+    points: &[[f32; 3]],
+    graph: &PixelGraph,
+    init: &Pose,
+    resume: Option<EmResume<'_>>,
+    prior: Option<&PosePrior>,
+    free_space: Option<FreeSpaceImage<'_>>,
+    config: &EmConfig,
+) -> Result<EmResult> {
+    crate::pool::on_worker(|| {
+        run_hard_em(
+            model, points, graph, init, resume, prior, free_space, config,
+        )
+    })
+}
+
+/// [`hard_em_from`] on the calling thread.
+#[allow(clippy::too_many_arguments)]
+fn run_hard_em(
     model: &BodyModel,
     points: &[[f32; 3]],
     graph: &PixelGraph,

@@ -579,7 +579,7 @@ impl FitProblem {
 
 /// Fits `model` to the foreground of `depth` (H×W metres, row-major; `mask` selects the
 /// person's pixels, None = every reading) starting from `init_pose`, with an optional
-/// prior toward a pose.
+/// prior toward a pose. Runs on a worker of rayon's pool ([`crate::pool::on_worker`]).
 pub fn fit_pose(
     depth: &[f32],
     camera: &Camera,
@@ -590,7 +590,9 @@ pub fn fit_pose(
     config: &FitConfig,
 ) -> Result<FitResult> {
     let init = pose_from_slice(init_pose, "init_pose")?;
-    FitProblem::new(depth, camera, mask, config)?.fit(model, &init, prior)
+    crate::pool::on_worker(|| {
+        FitProblem::new(depth, camera, mask, config)?.fit(model, &init, prior)
+    })
 }
 
 /// [`fit_pose`] from each of `inits` on the same image: the cloud and graph are built
@@ -618,12 +620,14 @@ pub fn fit_poses(
             ));
         }
     }
-    let problem = FitProblem::new(depth, camera, mask, config)?;
-    inits
-        .par_iter()
-        .enumerate()
-        .map(|(k, init)| problem.fit_from(model, init, resume.map(|r| r[k]), prior))
-        .collect()
+    crate::pool::on_worker(|| {
+        let problem = FitProblem::new(depth, camera, mask, config)?;
+        inits
+            .par_iter()
+            .enumerate()
+            .map(|(k, init)| problem.fit_from(model, init, resume.map(|r| r[k]), prior))
+            .collect()
+    })
 }
 
 #[cfg(test)]

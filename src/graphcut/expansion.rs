@@ -575,6 +575,8 @@ pub struct CrfSolver<C: Cost> {
     touched_valid: bool,
     /// Whether expansion moves leave provably fixed nodes out of the cut.
     prune: bool,
+    /// The labels a move proposes: equal to the labels it starts from except at the
+    /// nodes it switches (and restored there when the move is rejected).
     candidate: Vec<i32>,
 }
 
@@ -679,10 +681,14 @@ impl<C: Cost> CrfSolver<C> {
         let mut labels = c.check_init(init)?;
         self.prepare_expansion(&c);
         self.collect_candidates(&c, &labels);
+        self.candidate.copy_from_slice(&labels);
         let mut e = c.energy(&labels);
         let mut trace = vec![e.value()];
         // `version` counts accepted moves; a label whose move failed at the current
-        // version would fail again (same input), so it is skipped.
+        // version would fail again (same input), so it is skipped. An accepted move
+        // carries a failed label on to the new version when its switched nodes and
+        // their neighbours stay clear of that label's last move (see
+        // `still_failing`): the label's move would be the same max-flow problem again.
         let mut version = 0usize;
         let mut failed_at = vec![usize::MAX; c.l];
         let (mut cycles, mut tried) = (0, 0);
@@ -697,12 +703,24 @@ impl<C: Cost> CrfSolver<C> {
                 let new_e = self.expansion_move(&c, &labels, alpha as i32, &e);
                 if new_e.lt(&e) {
                     std::mem::swap(&mut labels, &mut self.candidate);
+                    // The proposal is the labelling again (see `candidate`).
+                    for &i in &self.free {
+                        self.candidate[i as usize] = alpha as i32;
+                    }
                     self.add_switched_candidates(&c, alpha);
                     e = new_e;
                     trace.push(e.value());
+                    for (beta, f) in failed_at.iter_mut().enumerate() {
+                        if *f == version && self.still_failing(&c, beta) {
+                            *f = version + 1;
+                        }
+                    }
                     version += 1;
                     improved = true;
                 } else {
+                    for &i in &self.free {
+                        self.candidate[i as usize] = labels[i as usize];
+                    }
                     failed_at[alpha] = version;
                 }
             }
@@ -720,6 +738,26 @@ impl<C: Cost> CrfSolver<C> {
             trace,
             cycles,
             moves_tried: tried,
+        })
+    }
+
+    /// After an accepted move (its switched nodes in `self.free`, their new candidate
+    /// sets added), whether the move of `beta`, which failed before it, is sure to
+    /// fail again. After a failed move a label's candidate set is exactly that move's
+    /// free nodes (the others leave it, see `expansion_move`). If no switched node and
+    /// no neighbour of one is in that set now, then the free nodes, their labels and
+    /// their neighbours' labels are what they were, so the move would build the same
+    /// graph, find the same cut and bring the same (non-negative) change again.
+    fn still_failing(&self, c: &Checked<C>, beta: usize) -> bool {
+        let set = &self.candidates[beta];
+        self.free.iter().all(|&iu| {
+            let i = iu as usize;
+            let (lo, hi) = (self.adj_start[i] as usize, self.adj_start[i + 1] as usize);
+            !set.get(i)
+                && self.adj[lo..hi].iter().all(|&k| {
+                    let [p, q] = c.edges[k as usize];
+                    !set.get(if p as usize == i { q } else { p } as usize)
+                })
         })
     }
 
@@ -797,7 +835,9 @@ impl<C: Cost> CrfSolver<C> {
     }
 
     /// Builds and solves the expansion move of `alpha` from `labels`, whose energy is
-    /// `e`; leaves the moved labelling in `self.candidate` and returns its energy.
+    /// `e`; leaves the moved labelling in `self.candidate` (which must hold `labels`
+    /// on entry; only the switched nodes, left in `self.free`, are written) and returns
+    /// its energy.
     ///
     /// Only the free nodes (see below) and their edges are visited: the move costs
     /// O(N) for the unary terms plus work proportional to the free nodes' edges, not a
@@ -909,7 +949,6 @@ impl<C: Cost> CrfSolver<C> {
         // Only the free nodes have terminal arcs (and edges): the solve visits them alone.
         self.graph.maxflow_seeded(&self.free);
         // The switched nodes: free and on the sink side.
-        self.candidate.copy_from_slice(labels);
         for &i in &self.free {
             self.is_free[i as usize] = false;
         }
@@ -1447,6 +1486,7 @@ mod tests {
                 for prune in [true, false] {
                     s.set_pruning(prune);
                     s.collect_candidates(&c, &labels);
+                    s.candidate.copy_from_slice(&labels);
                     let e = s.expansion_move(&c, &labels, alpha, &e0);
                     prop_assert_eq!(e.value(), best, "prune {}", prune);
                     // The energy by differences equals the moved labelling's own.
@@ -1474,6 +1514,7 @@ mod tests {
             let mut improved = false;
             for alpha in 0..c.l as i32 {
                 s.collect_candidates(&c, &labels);
+                s.candidate.copy_from_slice(&labels);
                 let new_e = s.expansion_move(&c, &labels, alpha, &e);
                 if new_e.lt(&e) {
                     labels.copy_from_slice(&s.candidate);

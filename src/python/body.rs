@@ -4,6 +4,7 @@ use super::arrays::{bool_array, depth_array};
 use super::arrays::{count, f32_array, f64_array, i64_array, to_numpy};
 use super::camera::PyCamera;
 use super::fit::{PyFitConfig, PyShapeFitResult};
+use super::native;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{
     pose_from_slice, pose_with_root_increment, BodyModel, BodyShape, Pose, JOINT_NAMES, NUM_JOINTS,
@@ -262,7 +263,7 @@ impl PyBodyModel {
         let pts = points_arg(points)?;
         let p = pose_arg(pose, "pose")?;
         let n = pts.len();
-        let out = py.detach(|| -> crate::Result<Vec<f32>> {
+        let out = native(py, || -> crate::Result<Vec<f32>> {
             let mut out = vec![0.0f32; n * NUM_SEGMENTS];
             match cap {
                 Some(c) => self.inner.distances_capped(&pts, &p, c, &mut out)?,
@@ -298,7 +299,7 @@ impl PyBodyModel {
             .collect();
         let p = pose_arg(pose, "pose")?;
         let n = pts.len();
-        let (r, j) = py.detach(|| -> crate::Result<(Vec<f64>, Vec<f64>)> {
+        let (r, j) = native(py, || -> crate::Result<(Vec<f64>, Vec<f64>)> {
             let (mut r, mut j) = (vec![0.0; n], vec![0.0; n * NUM_PARAMS]);
             self.inner
                 .residuals_and_jacobian(&pts, &lab, &p, &mut r, &mut j)?;
@@ -328,7 +329,7 @@ impl PyBodyModel {
         let m = bool_array(mask, "mask", &[h, w])?;
         let poses = poses_arg(poses, "poses")?;
         let cam = camera.inner;
-        let out = py.detach(|| {
+        let out = native(py, || {
             self.inner
                 .depth_discrepancies(&poses, &cam, &d.data, &m, cap)
         })?;
@@ -346,7 +347,7 @@ impl PyBodyModel {
     ) -> PyResult<(F32Array<'py>, I16Array<'py>)> {
         let p = pose_arg(pose, "pose")?;
         let cam = camera.inner;
-        let (d, l) = py.detach(|| self.inner.render_depth(&p, &cam));
+        let (d, l) = native(py, || self.inner.render_depth(&p, &cam));
         let shape = [cam.height, cam.width];
         Ok((to_numpy(py, d, &shape), to_numpy(py, l, &shape)))
     }
@@ -363,7 +364,7 @@ impl PyBodyModel {
     ) -> PyResult<Vec<(F64Array<'py>, I64Array<'py>)>> {
         let (rings, sectors) = (count(rings, "rings")?, count(sectors, "sectors")?);
         let p = pose_arg(pose, "pose")?;
-        let meshes = py.detach(|| {
+        let meshes = native(py, || {
             self.inner
                 .superquadric_meshes(&p, &MeshConfig { rings, sectors })
         })?;
@@ -510,7 +511,7 @@ impl PyBodyModel {
             other => other,
         })?;
         let base = self.inner.clone();
-        let result = py.detach(|| {
+        let result = native(py, || {
             let frames: Vec<ShapeFrame> = ds
                 .iter()
                 .enumerate()

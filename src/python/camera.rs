@@ -1,5 +1,6 @@
 //! `Camera` for Python.
 
+use super::native;
 use crate::camera::Camera;
 use pyo3::prelude::*;
 
@@ -128,7 +129,7 @@ impl PyCamera {
             .into());
         }
         let cam = self.inner;
-        let out: Vec<f64> = py.detach(|| {
+        let out: Vec<f64> = native(py, || {
             p.data
                 .chunks_exact(3)
                 .flat_map(
@@ -162,7 +163,7 @@ impl PyCamera {
             .into());
         }
         let cam = self.inner;
-        let out: Vec<f64> = py.detach(|| {
+        let out: Vec<f64> = native(py, || {
             uv.data
                 .chunks_exact(2)
                 .zip(&z.data)

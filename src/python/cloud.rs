@@ -2,6 +2,7 @@
 
 use super::arrays::{bool_array, count, depth_array, to_numpy};
 use super::camera::PyCamera;
+use super::native;
 use crate::cloud::{
     foreground_mask as fg_mask, neighbour_graph, normals_from_depth, Cloud, DepthView,
     ForegroundConfig, NormalConfig,
@@ -38,7 +39,7 @@ fn depth_to_points<'py>(
 ) -> PyResult<(F32Array<'py>, I32Array<'py>)> {
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
-    let cloud = py.detach(|| cloud_of(&d.data, &d.shape, camera, m.as_deref()))?;
+    let cloud = native(py, || cloud_of(&d.data, &d.shape, camera, m.as_deref()))?;
     let n = cloud.len();
     let pix: Vec<i32> = (0..n)
         .flat_map(|k| {
@@ -68,7 +69,7 @@ fn surface_normals<'py>(
             crate::Error::invalid("radius", format!("must be in 1..=32, got {radius}")).into(),
         );
     }
-    let normals = py.detach(|| -> PyResult<Vec<[f32; 3]>> {
+    let normals = native(py, || -> PyResult<Vec<[f32; 3]>> {
         let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         let cfg = NormalConfig {
@@ -99,7 +100,7 @@ fn pixel_graph<'py>(
     let d = depth_array(depth, "depth")?;
     let m = mask_arg(mask, &d.shape)?;
     let conn = super::arrays::connectivity(connectivity)?;
-    let g = py.detach(|| -> PyResult<_> {
+    let g = native(py, || -> PyResult<_> {
         let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
         Ok(neighbour_graph(&cloud, conn))
     })?;
@@ -144,7 +145,7 @@ fn foreground_mask<'py>(
         large_share,
         ..Default::default()
     };
-    let mask = py.detach(|| -> PyResult<Vec<bool>> {
+    let mask = native(py, || -> PyResult<Vec<bool>> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         let bgv = match &bg {
             Some(b) => Some(DepthView::new(

@@ -3,6 +3,7 @@
 use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
 use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::camera::PyCamera;
+use super::native;
 use crate::body::{
     BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS, PART_NAMES,
     SHAPE_FACTOR_NAMES,
@@ -464,7 +465,7 @@ fn fit_pose(
     let init = pose_arg(init_pose, "init_pose")?;
     let cam = camera.inner;
     let resume = resume.as_ref().map(|r| &r.result);
-    let result = py.detach(|| {
+    let result = native(py, || {
         fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.fit_from(
             &args.model,
             &init,
@@ -499,7 +500,7 @@ fn fit_poses(
     let resume: Option<Vec<&fit::FitResult>> = resume
         .as_ref()
         .map(|r| r.iter().map(|x| &x.result).collect());
-    let results = py.detach(|| {
+    let results = native(py, || {
         fit::fit_poses(
             &args.depth,
             &cam,
@@ -533,7 +534,7 @@ fn label_all_pixels(
     let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
     let cam = camera.inner;
     let fit = &result.result;
-    let labelled = py.detach(|| {
+    let labelled = native(py, || {
         fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.label_all(
             &args.model,
             fit,
@@ -567,7 +568,7 @@ fn pose_from_joints<'py>(
     let j: [Vector3<f64>; NUM_JOINTS] =
         std::array::from_fn(|k| Vector3::new(a.data[3 * k], a.data[3 * k + 1], a.data[3 * k + 2]));
     let model = model.map_or_else(BodyModel::default, |m| m.inner.clone());
-    let pose = py.detach(|| fit::pose_from_joints(&model, &j, init.as_ref()))?;
+    let pose = native(py, || fit::pose_from_joints(&model, &j, init.as_ref()))?;
     Ok(to_numpy(py, pose.to_vec(), &[NUM_PARAMS]))
 }
 

@@ -1,6 +1,7 @@
 //! Max-flow graphs and CRF move-making solvers for Python (`depthpose.graphcut`).
 
 use super::arrays::{count_at_least, f64_array, i64_array, to_numpy};
+use super::native;
 use crate::graphcut::{
     alpha_beta_swap as swap_core, alpha_expansion as expansion_core, energy as energy_core,
     grid_edges as grid_edges_core, maxflow::MAX_NODES, Cost, CrfProblem, Graph, Labelling,
@@ -226,11 +227,11 @@ impl PyGraph {
         match &mut self.inner {
             Inner::F(g) => {
                 let (c, r) = (f64_caps(cap, "cap")?, f64_caps(rev_cap, "rev_cap")?);
-                py.detach(|| g.add_edges(&s, &d, &c, &r))?;
+                native(py, || g.add_edges(&s, &d, &c, &r))?;
             }
             Inner::I(g) => {
                 let (c, r) = (i64_caps(cap, "cap")?, i64_caps(rev_cap, "rev_cap")?);
-                py.detach(|| g.add_edges(&s, &d, &c, &r))?;
+                native(py, || g.add_edges(&s, &d, &c, &r))?;
             }
         }
         Ok(())
@@ -262,8 +263,8 @@ impl PyGraph {
     /// by another build.
     fn finalize(&mut self, py: Python<'_>) {
         match &mut self.inner {
-            Inner::F(g) => py.detach(|| g.finalize()),
-            Inner::I(g) => py.detach(|| g.finalize()),
+            Inner::F(g) => native(py, || g.finalize()),
+            Inner::I(g) => native(py, || g.finalize()),
         }
     }
 
@@ -287,13 +288,11 @@ impl PyGraph {
             Inner::I(g) => g.set_max_threads(threads),
         }
         Ok(match &mut self.inner {
-            Inner::F(g) => py
-                .detach(|| g.maxflow())
+            Inner::F(g) => native(py, || g.maxflow())
                 .into_pyobject(py)?
                 .into_any()
                 .unbind(),
-            Inner::I(g) => py
-                .detach(|| g.maxflow())
+            Inner::I(g) => native(py, || g.maxflow())
                 .into_pyobject(py)?
                 .into_any()
                 .unbind(),
@@ -322,7 +321,7 @@ fn grid_edges<'py>(
     let h = count_at_least(h, 1, "h")?;
     let w = count_at_least(w, 1, "w")?;
     let connectivity = super::arrays::connectivity(connectivity)?.neighbours() as u8;
-    let e = py.detach(|| grid_edges_core(h, w, connectivity))?;
+    let e = native(py, || grid_edges_core(h, w, connectivity))?;
     let m = e.len();
     let flat: Vec<i64> = e.into_iter().flatten().map(i64::from).collect();
     Ok(to_numpy(py, flat, &[m, 2]))
@@ -511,7 +510,7 @@ fn solve<'py>(
     let init = init_arg(init)?;
     if integer_mode(unary, weights, pairwise) {
         let args = i64_crf(unary, edges, weights, pairwise)?;
-        let r = py.detach(|| i(&args.problem(), init.as_deref(), &cfg))?;
+        let r = native(py, || i(&args.problem(), init.as_deref(), &cfg))?;
         let n = r.labels.len();
         Ok((
             to_numpy(py, r.labels, &[n]),
@@ -519,7 +518,7 @@ fn solve<'py>(
         ))
     } else {
         let args = f64_crf(unary, edges, weights, pairwise)?;
-        let r = py.detach(|| f(&args.problem(), init.as_deref(), &cfg))?;
+        let r = native(py, || f(&args.problem(), init.as_deref(), &cfg))?;
         let n = r.labels.len();
         Ok((
             to_numpy(py, r.labels, &[n]),
@@ -605,11 +604,11 @@ fn crf_energy(
     let lab: Vec<i32> = lab.data.iter().map(|&v| v as i32).collect();
     if integer_mode(unary, weights, pairwise) {
         let a = i64_crf(unary, edges, weights, pairwise)?;
-        let e = py.detach(|| energy_core(&a.problem(), &lab))?;
+        let e = native(py, || energy_core(&a.problem(), &lab))?;
         Ok(e.into_pyobject(py)?.into_any().unbind())
     } else {
         let a = f64_crf(unary, edges, weights, pairwise)?;
-        let e = py.detach(|| energy_core(&a.problem(), &lab))?;
+        let e = native(py, || energy_core(&a.problem(), &lab))?;
         Ok(e.into_pyobject(py)?.into_any().unbind())
     }
 }

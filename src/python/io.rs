@@ -1,6 +1,7 @@
 //! Image reading and writing for Python (`depthpose.io` wraps these).
 
 use super::arrays::{depth_array, to_numpy, Arr};
+use super::native;
 use crate::io;
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
@@ -16,21 +17,21 @@ fn image_out<'py>(py: Python<'py>, img: io::Image) -> F32Array<'py> {
 #[pyfunction]
 #[pyo3(signature = (path, scale=0.001))]
 fn read_depth_image(py: Python<'_>, path: PathBuf, scale: f64) -> PyResult<F32Array<'_>> {
-    let img = py.detach(|| io::read_depth(&path, scale))?;
+    let img = native(py, || io::read_depth(&path, scale))?;
     Ok(image_out(py, img))
 }
 
 /// Any PNG/TIFF/JPEG as gray float32 (integer types scaled to [0, 1]).
 #[pyfunction]
 fn read_gray_image(py: Python<'_>, path: PathBuf) -> PyResult<F32Array<'_>> {
-    let img = py.detach(|| io::read_gray(&path))?;
+    let img = native(py, || io::read_gray(&path))?;
     Ok(image_out(py, img))
 }
 
 /// A float TIFF (first channel) as stored.
 #[pyfunction]
 fn read_float_image(py: Python<'_>, path: PathBuf) -> PyResult<F32Array<'_>> {
-    let img = py.detach(|| io::read_float(&path))?;
+    let img = native(py, || io::read_float(&path))?;
     Ok(image_out(py, img))
 }
 
@@ -44,7 +45,9 @@ fn write_depth_png(
     scale: f64,
 ) -> PyResult<()> {
     let d: Arr<f32> = depth_array(depth, "depth")?;
-    py.detach(|| io::write_depth_png(&path, &d.data, d.shape[0], d.shape[1], scale))?;
+    native(py, || {
+        io::write_depth_png(&path, &d.data, d.shape[0], d.shape[1], scale)
+    })?;
     Ok(())
 }
 
@@ -63,7 +66,9 @@ fn write_rgb_png(py: Python<'_>, path: PathBuf, rgb: &Bound<'_, PyAny>) -> PyRes
         .into());
     }
     let bytes: Vec<u8> = a.data.iter().map(|&v| v as u8).collect();
-    py.detach(|| io::write_rgb_png(&path, &bytes, a.shape[0], a.shape[1]))?;
+    native(py, || {
+        io::write_rgb_png(&path, &bytes, a.shape[0], a.shape[1])
+    })?;
     Ok(())
 }
 

@@ -3,7 +3,8 @@
 //! Bindings only convert and validate; algorithms live in the stage modules. Every
 //! function takes numpy arrays as `&Bound<PyAny>`, checks dtype / shape / contiguity /
 //! finiteness with the helpers below (errors name the argument), releases the GIL with
-//! `py.detach` around the real work and returns owned arrays. One file per stage.
+//! [`native`] (the GIL released, the work on a worker of rayon's pool) around the real
+//! work and returns owned arrays. One file per stage.
 
 mod arrays;
 mod body;
@@ -54,6 +55,13 @@ impl From<Error> for PyErr {
             Error::NoBody(_) => NoBodyError::new_err(msg),
         }
     }
+}
+
+/// Releases the GIL and runs `f` on a worker of rayon's pool
+/// ([`crate::pool::on_worker`]): the parallel loops inside then share their work with
+/// the other workers directly instead of waking this thread after each one.
+pub(crate) fn native<T: Send>(py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+    py.detach(|| crate::pool::on_worker(f))
 }
 
 #[pymodule]

@@ -1,6 +1,7 @@
 //! Stereo matching (Growing Correspondence Seeds) and disparity → depth, for Python.
 
 use super::arrays::{count, count_opt, f32_array, f64_array, seed as arg_seed, to_numpy, Arr};
+use super::native;
 use crate::stereo::{
     depth_from_disparity as depth_of, gray_from_rgb, match_stereo_seeded, Seed, Similarity,
     StereoConfig,
@@ -138,7 +139,9 @@ fn stereo_match<'py>(
         rng_seed: seed,
     };
     let (h, w) = (l.shape[0], l.shape[1]);
-    let res = py.detach(|| match_stereo_seeded(&l.data, &r.data, h, w, &config, &user))?;
+    let res = native(py, || {
+        match_stereo_seeded(&l.data, &r.data, h, w, &config, &user)
+    })?;
     Ok((
         to_numpy(py, res.disparity, &[h, w]),
         to_numpy(py, res.confidence, &[h, w]),
@@ -156,7 +159,7 @@ fn depth_from_disparity<'py>(
     doffs: f64,
 ) -> PyResult<F32Array<'py>> {
     let d = f32_array(disparity, "disparity", Some(2), false)?;
-    let z = py.detach(|| depth_of(&d.data, focal, baseline, doffs))?;
+    let z = native(py, || depth_of(&d.data, focal, baseline, doffs))?;
     Ok(to_numpy(py, z, &d.shape))
 }
 

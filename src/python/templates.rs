@@ -4,6 +4,7 @@ use super::arrays::{
     bool_array, count, depth_array, f32_array, f64_array, i64_array, seed as arg_seed, to_numpy,
 };
 use super::camera::PyCamera;
+use super::native;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{BodyModel, BodyShape, NUM_JOINTS, NUM_PARAMS, NUM_SHAPE_PARAMS};
 use crate::cloud::DepthView;
@@ -114,7 +115,7 @@ fn surface_context<'py>(
         depth_weight,
         ..Default::default()
     };
-    let sc = py.detach(|| -> crate::Result<_> {
+    let sc = native(py, || -> crate::Result<_> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         surface_context_from_depth(&view, &camera.inner, m.as_deref(), &cfg)
     })?;
@@ -170,7 +171,7 @@ impl PyTemplateDatabase {
             depth_weight,
         )?;
         let mut callback_error: Option<PyErr> = None;
-        let db = py.detach(|| {
+        let db = native(py, || {
             TemplateDatabase::build_with_progress(&model, &cfg, |done, total| {
                 if let (Some(cb), None) = (&progress, &callback_error) {
                     Python::attach(|py| {
@@ -232,7 +233,7 @@ impl PyTemplateDatabase {
             )
             .into());
         }
-        let db = py.detach(|| TemplateDatabase::from_depths(&model, &cfg, &d.data))?;
+        let db = native(py, || TemplateDatabase::from_depths(&model, &cfg, &d.data))?;
         Ok(PyTemplateDatabase { inner: db })
     }
 
@@ -266,7 +267,9 @@ impl PyTemplateDatabase {
             d.descriptor.depth_weight,
         )?;
         let index = count(index, "index")?;
-        let depth = py.detach(|| crate::templates::render_template(&model, &cfg, index))?;
+        let depth = native(py, || {
+            crate::templates::render_template(&model, &cfg, index)
+        })?;
         Ok(to_numpy(py, depth, &[cfg.height, cfg.width]))
     }
 
@@ -291,7 +294,7 @@ impl PyTemplateDatabase {
         }
         crate::error::ensure_positive(distance, "distance")?;
         let model = model_of(model_shape)?;
-        let meshes = py.detach(|| {
+        let meshes = native(py, || {
             model.superquadric_meshes(
                 &template_pose(index, distance),
                 &MeshConfig { rings, sectors },
@@ -343,7 +346,7 @@ impl PyTemplateDatabase {
             dummy_cost,
             rerank,
         };
-        let r = py.detach(|| -> crate::Result<_> {
+        let r = native(py, || -> crate::Result<_> {
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
             self.inner
                 .match_depth(&view, &camera.inner, m.as_deref(), &cfg)
@@ -389,7 +392,7 @@ impl PyTemplateDatabase {
         if let Some(&bad) = indices.iter().find(|&&i| i >= self.inner.len()) {
             return Err(Error::invalid("indices", format!("{bad} is not a template")).into());
         }
-        let r = py.detach(|| -> crate::Result<Vec<f64>> {
+        let r = native(py, || -> crate::Result<Vec<f64>> {
             use rayon::prelude::*;
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
             let dc = &self.inner.config.descriptor;
@@ -522,7 +525,7 @@ impl PyTemplateDatabase {
             (None, None) => None,
             _ => return Err(Error::invalid("model_shape/config", "give both or neither").into()),
         };
-        let db = py.detach(|| {
+        let db = native(py, || {
             TemplateDatabase::from_arrays(&a, expected.as_ref().map(|(m, c)| (m, c)), source)
         })?;
         Ok(PyTemplateDatabase { inner: db })
