@@ -22,7 +22,7 @@ fn natural_pose() -> Pose {
 }
 
 /// Small deterministic generator in [−1, 1).
-pub(crate) struct Rng(u64);
+pub(crate) struct Rng(pub(crate) u64);
 impl Rng {
     pub(crate) fn next(&mut self) -> f64 {
         self.0 = self
