@@ -966,7 +966,7 @@ fn run_hard_em(
             m_steps_ahead && last_changed == Some(0) && iterations < config.max_iterations;
         let (new_labels, m_step_ahead) = if speculate {
             let point_cost = config.point_cost(tau);
-            let (new_labels, ahead) = rayon::join(
+            let (new_labels, m_step_done) = rayon::join(
                 || crf.expand(model, points, config, &labels),
                 || {
                     objective.relabel(&labels, point_cost);
@@ -974,7 +974,7 @@ fn run_hard_em(
                     m_step(&mut lm, &mut objective, prior, free_space, &pose)
                 },
             );
-            (new_labels?, Some(ahead))
+            (new_labels?, Some(m_step_done))
         } else {
             (crf.expand(model, points, config, &labels)?, None)
         };
