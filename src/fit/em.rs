@@ -1051,9 +1051,13 @@ mod tests {
         truth[param::L_SHOULDER + 1] = 0.3;
         truth[param::R_KNEE] = 0.4;
         let (depth, _) = model.render_depth(&truth, &cam);
-        let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
-        let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
-        let graph = neighbour_graph(&cloud, Connectivity::Four);
+        let cloud_and_graph = |depth: &[f32]| {
+            let view = DepthView::new(depth, cam.height, cam.width, "depth").unwrap();
+            let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
+            let graph = neighbour_graph(&cloud, Connectivity::Four);
+            (cloud, graph)
+        };
+        let (cloud, graph) = cloud_and_graph(&depth);
         let image = FreeSpaceImage {
             depth: &depth,
             camera: &cam,
@@ -1064,8 +1068,8 @@ mod tests {
         // has shrunk past them, after the other labels have settled, so an E-step
         // changes labels after one that kept them and the M-step run beside that one
         // is discarded.
-        let (w, h) = (cam.width, cam.height);
-        let fg: Vec<usize> = (0..w * h).filter(|&i| depth[i] > 0.0).collect();
+        let w = cam.width;
+        let fg: Vec<usize> = (0..depth.len()).filter(|&i| depth[i] > 0.0).collect();
         let (cr, cc) = (
             fg.iter().map(|i| i / w).sum::<usize>() / fg.len(),
             fg.iter().map(|i| i % w).sum::<usize>() / fg.len(),
@@ -1078,13 +1082,7 @@ mod tests {
                 }
             }
         }
-        let patched_cloud = Cloud::from_depth(
-            &DepthView::new(&patched, h, w, "depth").unwrap(),
-            &cam,
-            None,
-        )
-        .unwrap();
-        let patched_graph = neighbour_graph(&patched_cloud, Connectivity::Four);
+        let (patched_cloud, patched_graph) = cloud_and_graph(&patched);
         let slow_anneal = EmConfig {
             anneal_iterations: 12,
             max_iterations: 16,
