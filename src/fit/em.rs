@@ -32,6 +32,7 @@ use crate::cloud::PixelGraph;
 use crate::error::{ensure, Error, Result};
 use crate::graphcut::{CrfProblem, CrfSolver, MoveConfig};
 use rayon::prelude::*;
+use std::sync::atomic::AtomicBool;
 
 /// Label of the outlier class inside the CRF (exported as −1).
 pub const OUTLIER: i32 = NUM_SEGMENTS as i32;
@@ -699,17 +700,47 @@ impl<'g> EStep<'g> {
             .solver
             .alpha_expansion(&p, Some(init), &self.moves)?
             .labels;
+        self.settle(model, points, config, &labels);
+        Ok(labels)
+    }
+
+    /// [`Self::expand`] with `beside` run beside its cycles after the first (see
+    /// [`CrfSolver::alpha_expansion_beside`]): its output for the labels returned, if
+    /// it ran for them.
+    fn expand_beside<R: Send>(
+        &mut self,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        config: &EmConfig,
+        init: &[i32],
+        beside: &mut (impl FnMut(&[i32], &AtomicBool) -> R + Send),
+    ) -> Result<(Vec<i32>, Option<R>)> {
+        let p = problem(&self.unary, &self.graph.edges, &self.weights);
+        let (labelling, output) =
+            self.solver
+                .alpha_expansion_beside(&p, Some(init), &self.moves, beside)?;
+        self.settle(model, points, config, &labelling.labels);
+        Ok((labelling.labels, output))
+    }
+
+    /// Makes the terms of `labels` exact (see [`settle_unary`]).
+    fn settle(
+        &mut self,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        config: &EmConfig,
+        labels: &[i32],
+    ) {
         settle_unary(
             model,
             points,
             &self.pose,
             config,
             self.tau,
-            &labels,
+            labels,
             &mut self.unary,
             &mut self.skipped,
         );
-        Ok(labels)
     }
 }
 
@@ -807,11 +838,45 @@ fn m_step(
     (pose, report)
 }
 
-/// M-steps run beside an E-step: used (the E-step kept the labels) or discarded.
+/// [`m_step`] for the labels `labels`, run ahead beside an E-step: abandoned (`None`)
+/// once `abandon` is raised.
+#[allow(clippy::too_many_arguments)]
+fn m_step_ahead(
+    lm: &mut LevenbergMarquardt,
+    objective: &mut PointObjective,
+    labels: &[i32],
+    point_cost: PointCost,
+    prior: Option<&PosePrior>,
+    free_space: Option<&FreeSpaceTerm>,
+    start: &Pose,
+    abandon: &AtomicBool,
+) -> Option<(Pose, LmReport)> {
+    objective.relabel(labels, point_cost);
+    let mut pose = *start;
+    let mut with_prior = WithPrior {
+        objective,
+        prior,
+        free_space,
+    };
+    let report = lm.minimize_unless(&mut with_prior, &mut pose, abandon)?;
+    Some((pose, report))
+}
+
+/// M-steps run beside an E-step, and how many of them were used (they had the labels
+/// the E-step ended with); the others were discarded or abandoned.
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
 struct MStepsAhead {
+    run: usize,
     used: usize,
-    discarded: usize,
+    /// Of those used, the ones run beside an expansion's last cycle.
+    used_beside_last_cycle: usize,
+}
+
+/// An M-step run beside an E-step, for the labels the E-step started from or for
+/// those it ended with.
+enum RunAhead {
+    ForOldLabels((Pose, LmReport)),
+    ForNewLabels((Pose, LmReport)),
 }
 
 /// [`hard_em_from`] on the calling thread; with `m_steps_ahead`, late M-steps run
@@ -871,6 +936,7 @@ fn run_hard_em(
     }
     let mut crf = EStep::new(graph, n, config)?;
     let mut lm = LevenbergMarquardt::new(config.lm)?;
+    let mut ahead = MStepsAhead::default();
     // The pose-only terms of the energy: the prior and the free space.
     let pose_cost = |p: &Pose| {
         prior.map_or(0.0, |pr| pr.cost(p)) + free_space.as_ref().map_or(0.0, |f| f.cost(p))
@@ -879,6 +945,11 @@ fn run_hard_em(
     let mut pose = BodyModel::clamp_pose(init);
     let mut iterations = resume.map_or(0, |r| r.iterations);
     let mut tau = config.outlier_distance_at(iterations);
+    // The first M-step, run beside the initial E-step (see the E-step below).
+    let mut next_m_step: Option<(Pose, LmReport)> = None;
+    // (Relabelled before each M-step.)
+    let mut objective =
+        PointObjective::new(model, points, &vec![OUTLIER; n], config.point_cost(tau));
     let mut labels: Vec<i32> = match resume {
         Some(r) => {
             if r.labels.len() != n {
@@ -904,36 +975,44 @@ fn run_hard_em(
             // the CRF.
             crf.set_pose(model, points, &pose, config, tau, None);
             let cheapest = crf.cheapest_labels();
-            crf.expand(model, points, config, &cheapest)?
+            if m_steps_ahead && iterations < config.max_iterations {
+                let point_cost = config.point_cost(tau);
+                let (start, fs) = (pose, &mut free_space_ahead);
+                let (lm, objective) = (&mut lm, &mut objective);
+                let runs = &mut ahead.run;
+                let mut beside = |seen: &[i32], abandon: &AtomicBool| {
+                    *runs += 1;
+                    let fs = fs.as_mut().map(|f| &*f);
+                    m_step_ahead(lm, objective, seen, point_cost, prior, fs, &start, abandon)
+                };
+                let (labels, m_step) =
+                    crf.expand_beside(model, points, config, &cheapest, &mut beside)?;
+                // The first M-step's labels are these.
+                next_m_step = m_step.flatten();
+                ahead.used += usize::from(next_m_step.is_some());
+                ahead.used_beside_last_cycle += usize::from(next_m_step.is_some());
+                labels
+            } else {
+                crf.expand(model, points, config, &cheapest)?
+            }
         }
     };
     let mut energy = crf.energy(&labels) + pose_cost(&pose);
     let mut trace = vec![energy];
     let mut termination = EmTermination::MaxIterations;
-    let mut objective = PointObjective::new(model, points, &labels, config.point_cost(tau));
-    let mut first_pass = true;
     // The label changes of the last E-step (none yet).
     let mut last_changed = None;
-    // The next M-step, already run beside the last E-step for the labels it kept.
-    let mut next_m_step: Option<(Pose, LmReport)> = None;
-    let mut ahead = MStepsAhead::default();
     while iterations < config.max_iterations {
         iterations += 1;
         let energy_at_start = energy;
         // M-step (the objective was built for the first one).
         let (new_pose, report) = match next_m_step.take() {
-            Some(done) => {
-                ahead.used += 1;
-                done
-            }
+            Some(done) => done,
             None => {
-                if !first_pass {
-                    objective.relabel(&labels, config.point_cost(tau));
-                }
+                objective.relabel(&labels, config.point_cost(tau));
                 m_step(&mut lm, &mut objective, prior, free_space.as_ref(), &pose)
             }
         };
-        first_pass = false;
         let pose_moved = report.accepted > 0;
         // Anneal τ: every unary term can only drop. The unary terms for the moved pose
         // are computed once, at the next τ: E(new pose, next τ) ≤ E(new pose, τ) ≤
@@ -957,15 +1036,18 @@ fn run_hard_em(
             crf.set_pose(model, points, &pose, config, tau, Some(&labels));
             energy = crf.energy(&labels) + pose_cost(&pose);
         }
-        // E-step. The expansion runs on one core. Once an E-step has left the labels
-        // as they were (the late iterations), the next M-step is run beside it on the
-        // other core for the labels it starts from, the next M-step's exact inputs
-        // should the labels stay again (its pose and τ are this E-step's); it is used
-        // only then, so the EM is the same as run one step after the other.
-        let speculate =
-            m_steps_ahead && last_changed == Some(0) && iterations < config.max_iterations;
-        let (new_labels, m_step_ahead) = if speculate {
-            let point_cost = config.point_cost(tau);
+        // E-step. The expansion runs on one core; the next M-step runs beside it on
+        // the other, for labels the E-step is likely to end with, with the next
+        // M-step's other inputs (the pose and τ are this E-step's). It is used only if
+        // the labels it ran for are the ones the next M-step starts from, so the EM is
+        // the same as run one step after the other. Once an E-step has left the labels
+        // as they were (the late iterations), the M-step runs beside the whole E-step
+        // for the labels it starts from; else beside the expansion's last cycle, for
+        // the labels that cycle starts from (see `CrfSolver::alpha_expansion_beside`).
+        let may_run_ahead = m_steps_ahead && iterations < config.max_iterations;
+        let point_cost = config.point_cost(tau);
+        let (new_labels, m_step_ahead) = if may_run_ahead && last_changed == Some(0) {
+            ahead.run += 1;
             let (new_labels, m_step_done) = rayon::join(
                 || crf.expand(model, points, config, &labels),
                 || {
@@ -974,7 +1056,21 @@ fn run_hard_em(
                     m_step(&mut lm, &mut objective, prior, free_space, &pose)
                 },
             );
-            (new_labels?, Some(m_step_done))
+            (new_labels?, Some(RunAhead::ForOldLabels(m_step_done)))
+        } else if may_run_ahead {
+            let (start, fs) = (pose, &mut free_space_ahead);
+            let (lm, objective, runs) = (&mut lm, &mut objective, &mut ahead.run);
+            let mut beside = |seen: &[i32], abandon: &AtomicBool| {
+                *runs += 1;
+                let fs = fs.as_mut().map(|f| &*f);
+                m_step_ahead(lm, objective, seen, point_cost, prior, fs, &start, abandon)
+            };
+            let (new_labels, m_step_done) =
+                crf.expand_beside(model, points, config, &labels, &mut beside)?;
+            (
+                new_labels,
+                m_step_done.flatten().map(RunAhead::ForNewLabels),
+            )
         } else {
             (crf.expand(model, points, config, &labels)?, None)
         };
@@ -984,16 +1080,21 @@ fn run_hard_em(
             .filter(|(a, b)| a != b)
             .count();
         let e = crf.energy(&new_labels) + pose_cost(&pose);
-        let labels_kept = changed == 0 || e > energy;
-        if e <= energy {
+        let accept = e <= energy;
+        if accept {
             labels = new_labels;
             energy = e;
         }
-        if labels_kept {
-            next_m_step = m_step_ahead;
-        } else if m_step_ahead.is_some() {
-            ahead.discarded += 1;
-        }
+        // Whether the M-step run ahead had the labels the next M-step starts from.
+        next_m_step = match m_step_ahead {
+            Some(RunAhead::ForOldLabels(m)) if changed == 0 || !accept => Some(m),
+            Some(RunAhead::ForNewLabels(m)) if changed == 0 || accept => {
+                ahead.used_beside_last_cycle += 1;
+                Some(m)
+            }
+            _ => None,
+        };
+        ahead.used += usize::from(next_m_step.is_some());
         last_changed = Some(changed);
         trace.push(energy);
         let annealed = iterations >= config.anneal_iterations;
@@ -1119,10 +1220,16 @@ mod tests {
                 one_by_one.energy_trace,
                 with_ahead.energy_trace
             );
+            total.run += counts.run;
             total.used += counts.used;
-            total.discarded += counts.discarded;
+            total.used_beside_last_cycle += counts.used_beside_last_cycle;
         }
-        assert!(total.used > 0 && total.discarded > 0, "{total:?}");
+        // Both kinds used, and some discarded.
+        let beside_whole_e_step = total.used - total.used_beside_last_cycle;
+        assert!(
+            beside_whole_e_step > 0 && total.used_beside_last_cycle > 0 && total.run > total.used,
+            "{total:?}"
+        );
     }
 
     /// The unary with lower-bound skipping and lockstep root solves equals the unary

@@ -18,6 +18,7 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
 use faer::{Mat, Par};
 use nalgebra::{Rotation3, Vector3};
+use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
 /// Parameters per pose.
 pub const N: usize = NUM_PARAMS;
@@ -288,6 +289,20 @@ impl LevenbergMarquardt {
     /// Minimises `objective` from `pose` (clamped into the limits first); `pose` is
     /// updated in place.
     pub fn minimize<O: PoseObjective>(&mut self, objective: &mut O, pose: &mut Pose) -> LmReport {
+        let never = AtomicBool::new(false);
+        self.minimize_unless(objective, pose, &never)
+            .expect("the flag is never raised")
+    }
+
+    /// [`Self::minimize`], abandoned (`None`, `pose` then part-way) once `abandon` is
+    /// raised: checked before each new normal system, so another thread can stop a
+    /// minimisation whose result it knows will not be used.
+    pub fn minimize_unless<O: PoseObjective>(
+        &mut self,
+        objective: &mut O,
+        pose: &mut Pose,
+        abandon: &AtomicBool,
+    ) -> Option<LmReport> {
         let cfg = self.config;
         *pose = BodyModel::clamp_pose(pose);
         let mut lambda = cfg.initial_damping;
@@ -338,6 +353,9 @@ impl LevenbergMarquardt {
                             cost = new_cost;
                             break 'outer Termination::MaxIterations;
                         }
+                        if abandon.load(AtomicOrdering::Relaxed) {
+                            return None;
+                        }
                         cost = objective.normal_equations(pose, &mut self.h, &mut self.g);
                         iterations += 1;
                         break;
@@ -352,13 +370,13 @@ impl LevenbergMarquardt {
                 }
             }
         };
-        LmReport {
+        Some(LmReport {
             initial_cost,
             cost,
             iterations,
             accepted,
             termination,
-        }
+        })
     }
 
     /// Solves (H + λ·max(diag H, floor)) δ = −g with fixed parameters pinned to δ = 0.
@@ -539,6 +557,61 @@ mod tests {
             } else {
                 assert!(g[i].abs() < 1e-6, "param {i}: gradient {}", g[i]);
             }
+        }
+    }
+
+    /// The bowl, raising `flag` while it builds its `at`-th normal system.
+    struct RaiseAt<'a> {
+        bowl: Bowl,
+        systems: usize,
+        at: usize,
+        flag: &'a AtomicBool,
+    }
+
+    impl PoseObjective for RaiseAt<'_> {
+        fn cost(&mut self, pose: &Pose) -> f64 {
+            self.bowl.cost(pose)
+        }
+        fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
+            self.systems += 1;
+            if self.systems == self.at {
+                self.flag.store(true, AtomicOrdering::Relaxed);
+            }
+            self.bowl.normal_equations(pose, h, g)
+        }
+    }
+
+    #[test]
+    fn a_raised_flag_abandons_the_minimisation() {
+        let tight = LmConfig {
+            cost_tolerance: 1e-15,
+            max_iterations: 100,
+            ..LmConfig::default()
+        };
+        let run = |at: usize| {
+            let flag = AtomicBool::new(false);
+            let mut objective = RaiseAt {
+                bowl: Bowl::new(),
+                systems: 0,
+                at,
+                flag: &flag,
+            };
+            let mut lm = LevenbergMarquardt::new(tight).unwrap();
+            let mut pose = BodyModel::neutral_pose();
+            let report = lm.minimize_unless(&mut objective, &mut pose, &flag);
+            (report, pose, objective.systems)
+        };
+        // Never raised: the same as `minimize`, over several normal systems.
+        let (report, pose, systems) = run(usize::MAX);
+        let mut plain_pose = BodyModel::neutral_pose();
+        let mut lm = LevenbergMarquardt::new(tight).unwrap();
+        let plain = lm.minimize(&mut Bowl::new(), &mut plain_pose);
+        assert_eq!((report, pose), (Some(plain), plain_pose));
+        assert!(systems >= 4, "{systems} normal systems");
+        // Raised while building the k-th system: no further system is built.
+        for at in 1..systems {
+            let (report, _, built) = run(at);
+            assert_eq!((report, built), (None, at));
         }
     }
 

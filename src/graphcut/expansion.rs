@@ -21,6 +21,7 @@ use super::maxflow::{Capacity, Graph};
 use crate::error::{ensure, Error, Result};
 use rayon::prelude::*;
 use std::cmp::Ordering;
+use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
 /// Default number of cycles over all labels (or label pairs).
 pub const DEFAULT_MAX_CYCLES: usize = 20;
@@ -539,6 +540,21 @@ pub fn alpha_beta_swap<C: Cost>(
     CrfSolver::new(n, problem.edges)?.alpha_beta_swap(problem, init, config)
 }
 
+/// The state of one `alpha_expansion` call between its cycles.
+struct ExpansionRun<C: Cost> {
+    labels: Vec<i32>,
+    e: Energy<C>,
+    trace: Vec<C>,
+    /// Accepted moves so far.
+    version: usize,
+    /// Per label: the version at which its move last failed.
+    failed_at: Vec<usize>,
+    tried: usize,
+}
+
+/// The work beside the cycles when there is none (its type is never called).
+type Never = fn(&[i32], &AtomicBool);
+
 /// Move-making solver for a fixed node set and edge list: the move graph is built once
 /// and only its capacities are reset for each move; buffers are reused across calls
 /// (the E-step calls it several times per frame on the same neighbourhood graph).
@@ -677,53 +693,80 @@ impl<C: Cost> CrfSolver<C> {
         init: Option<&[i32]>,
         config: &MoveConfig,
     ) -> Result<Labelling<C>> {
+        self.expansion_with(problem, init, config, None::<&mut Never>)
+            .map(|(labelling, _)| labelling)
+    }
+
+    /// [`Self::alpha_expansion`] with `beside` run on another worker of rayon's pool
+    /// beside every cycle after the first, for the labelling that cycle starts from.
+    /// The expansion ends with a cycle that accepts no move, so the labelling that
+    /// cycle starts from is usually the result: `beside` can start the work that
+    /// needs the result before the last cycle has confirmed it. Returns `beside`'s
+    /// output for the cycle that ended the solve when it accepted no move (its
+    /// labelling is then exactly the result's), else `None`. The flag passed to
+    /// `beside` is raised as soon as its cycle accepts a move: its output will be
+    /// dropped, and it may stop early. The labelling is the same as
+    /// [`Self::alpha_expansion`]'s.
+    pub fn alpha_expansion_beside<R, F>(
+        &mut self,
+        problem: &CrfProblem<C>,
+        init: Option<&[i32]>,
+        config: &MoveConfig,
+        beside: &mut F,
+    ) -> Result<(Labelling<C>, Option<R>)>
+    where
+        R: Send,
+        F: FnMut(&[i32], &AtomicBool) -> R + Send,
+    {
+        self.expansion_with(problem, init, config, Some(beside))
+    }
+
+    fn expansion_with<R, F>(
+        &mut self,
+        problem: &CrfProblem<C>,
+        init: Option<&[i32]>,
+        config: &MoveConfig,
+        mut beside: Option<&mut F>,
+    ) -> Result<(Labelling<C>, Option<R>)>
+    where
+        R: Send,
+        F: FnMut(&[i32], &AtomicBool) -> R + Send,
+    {
         let c = self.check(problem, true)?;
-        let mut labels = c.check_init(init)?;
+        let labels = c.check_init(init)?;
         self.prepare_expansion(&c);
         self.collect_candidates(&c, &labels);
         self.candidate.copy_from_slice(&labels);
-        let mut e = c.energy(&labels);
-        let mut trace = vec![e.value()];
-        // `version` counts accepted moves; a label whose move failed at the current
-        // version would fail again (same input), so it is skipped. An accepted move
-        // carries a failed label on to the new version when its switched nodes and
-        // their neighbours stay clear of that label's last move (see
-        // `still_failing`): the label's move would be the same max-flow problem again.
-        let mut version = 0usize;
-        let mut failed_at = vec![usize::MAX; c.l];
-        let (mut cycles, mut tried) = (0, 0);
+        let e = c.energy(&labels);
+        let mut run = ExpansionRun {
+            labels,
+            e,
+            trace: vec![e.value()],
+            version: 0,
+            failed_at: vec![usize::MAX; c.l],
+            tried: 0,
+        };
+        let mut cycles = 0;
+        let mut beside_output = None;
+        // The labelling the work beside a cycle sees (a copy: the cycle changes its own).
+        let mut seen = Vec::new();
         while cycles < config.max_cycles {
             cycles += 1;
-            let mut improved = false;
-            for alpha in 0..c.l {
-                if !c.allowed_somewhere[alpha] || failed_at[alpha] == version {
-                    continue;
+            let improved = match beside.as_deref_mut() {
+                Some(work) if cycles > 1 => {
+                    seen.clone_from(&run.labels);
+                    let accepted = AtomicBool::new(false);
+                    let (improved, output) = rayon::join(
+                        || self.expansion_cycle(&c, &mut run, Some(&accepted)),
+                        || work(&seen, &accepted),
+                    );
+                    if !improved {
+                        beside_output = Some(output);
+                    }
+                    improved
                 }
-                tried += 1;
-                let new_e = self.expansion_move(&c, &labels, alpha as i32, &e);
-                if new_e.lt(&e) {
-                    std::mem::swap(&mut labels, &mut self.candidate);
-                    // The proposal is the labelling again (see `candidate`).
-                    for &i in &self.free {
-                        self.candidate[i as usize] = alpha as i32;
-                    }
-                    self.add_switched_candidates(&c, alpha);
-                    e = new_e;
-                    trace.push(e.value());
-                    for (beta, f) in failed_at.iter_mut().enumerate() {
-                        if *f == version && self.still_failing(&c, beta) {
-                            *f = version + 1;
-                        }
-                    }
-                    version += 1;
-                    improved = true;
-                } else {
-                    for &i in &self.free {
-                        self.candidate[i as usize] = labels[i as usize];
-                    }
-                    failed_at[alpha] = version;
-                }
-            }
+                _ => self.expansion_cycle(&c, &mut run, None),
+            };
             if !improved {
                 break;
             }
@@ -731,14 +774,67 @@ impl<C: Cost> CrfSolver<C> {
         // The moves update the energy by differences; the result is summed afresh so
         // that it equals `energy(labels)` exactly (floats may differ in the last bits
         // from the running value, which the trace keeps).
-        let energy = c.energy(&labels).value();
-        Ok(Labelling {
-            labels,
+        let energy = c.energy(&run.labels).value();
+        let labelling = Labelling {
+            labels: run.labels,
             energy,
-            trace,
+            trace: run.trace,
             cycles,
-            moves_tried: tried,
-        })
+            moves_tried: run.tried,
+        };
+        Ok((labelling, beside_output))
+    }
+
+    /// One cycle of expansion moves over every label; whether a move was accepted (then
+    /// `accepted`, if given, is raised at the first).
+    fn expansion_cycle(
+        &mut self,
+        c: &Checked<C>,
+        run: &mut ExpansionRun<C>,
+        accepted: Option<&AtomicBool>,
+    ) -> bool {
+        // `version` counts accepted moves; a label whose move failed at the current
+        // version would fail again (same input), so it is skipped. An accepted move
+        // carries a failed label on to the new version when its switched nodes and
+        // their neighbours stay clear of that label's last move (see
+        // `still_failing`): the label's move would be the same max-flow problem again.
+        let mut improved = false;
+        for alpha in 0..c.l {
+            if !c.allowed_somewhere[alpha] || run.failed_at[alpha] == run.version {
+                continue;
+            }
+            run.tried += 1;
+            let new_e = self.expansion_move(c, &run.labels, alpha as i32, &run.e);
+            if new_e.lt(&run.e) {
+                if !improved {
+                    if let Some(flag) = accepted {
+                        flag.store(true, AtomicOrdering::Relaxed);
+                    }
+                }
+                std::mem::swap(&mut run.labels, &mut self.candidate);
+                // The proposal is the labelling again (see `candidate`).
+                for &i in &self.free {
+                    self.candidate[i as usize] = alpha as i32;
+                }
+                self.add_switched_candidates(c, alpha);
+                run.e = new_e;
+                run.trace.push(run.e.value());
+                let version = run.version;
+                for (beta, f) in run.failed_at.iter_mut().enumerate() {
+                    if *f == version && self.still_failing(c, beta) {
+                        *f = version + 1;
+                    }
+                }
+                run.version += 1;
+                improved = true;
+            } else {
+                for &i in &self.free {
+                    self.candidate[i as usize] = run.labels[i as usize];
+                }
+                run.failed_at[alpha] = run.version;
+            }
+        }
+        improved
     }
 
     /// After an accepted move (its switched nodes in `self.free`, their new candidate
@@ -1562,6 +1658,52 @@ mod tests {
             let cfg = MoveConfig { max_cycles: 5 };
             let got = s.alpha_expansion(&v, Some(&init), &cfg).unwrap();
             prop_assert_eq!(got.labels, expansion_rebuilding_candidates(&v, &init, 5));
+        }
+    }
+
+    proptest! {
+        /// The work beside the cycles changes nothing in the expansion, runs beside
+        /// every cycle after the first, and its output is returned exactly when its
+        /// cycle accepted no move, having seen the labelling returned.
+        #[test]
+        fn work_beside_the_last_cycle_sees_the_result(
+            w in 2usize..9,
+            h in 2usize..9,
+            l in 2usize..6,
+            unary_seed in prop::collection::vec(0i64..40, 64 * 6),
+            weight_seed in prop::collection::vec(0i64..12, 2 * 64),
+            max_cycles in 1usize..5,
+        ) {
+            let n = w * h;
+            let edges = crate::graphcut::grid_edges(h, w, 4).unwrap();
+            let p = Prob {
+                l,
+                unary: unary_seed[..n * l].to_vec(),
+                weights: weight_seed[..edges.len()].to_vec(),
+                edges,
+            };
+            let v = p.view(None);
+            let init: Vec<i32> = (0..n).map(|i| ((i * 3 + 1) % l) as i32).collect();
+            let cfg = MoveConfig { max_cycles };
+            let mut s = CrfSolver::new(n, &p.edges).unwrap();
+            let plain = s.alpha_expansion(&v, Some(&init), &cfg).unwrap();
+            let mut seen = Vec::new();
+            let (with, output) = s
+                .alpha_expansion_beside(&v, Some(&init), &cfg, &mut |labels, _| {
+                    seen.push(labels.to_vec());
+                    labels.to_vec()
+                })
+                .unwrap();
+            prop_assert_eq!(&with, &plain);
+            prop_assert_eq!(seen.len(), plain.cycles - 1);
+            // Whether the last cycle accepted no move: one cycle fewer ends elsewhere.
+            let fewer = MoveConfig { max_cycles: plain.cycles - 1 };
+            let last_cycle_idle = plain.cycles > 1
+                && s.alpha_expansion(&v, Some(&init), &fewer).unwrap().labels == plain.labels;
+            prop_assert_eq!(output.is_some(), last_cycle_idle);
+            if let Some(labels) = output {
+                prop_assert_eq!(&labels, &plain.labels);
+            }
         }
     }
 
