@@ -1625,6 +1625,18 @@ mod tests {
         labels
     }
 
+    /// An `h`×`w` 4-connected grid with `l` labels, its unaries and weights the
+    /// seeds' first values.
+    fn grid_prob(w: usize, h: usize, l: usize, unary_seed: &[i64], weight_seed: &[i64]) -> Prob {
+        let edges = crate::graphcut::grid_edges(h, w, 4).unwrap();
+        Prob {
+            l,
+            unary: unary_seed[..w * h * l].to_vec(),
+            weights: weight_seed[..edges.len()].to_vec(),
+            edges,
+        }
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(200))]
 
@@ -1644,13 +1656,7 @@ mod tests {
             metric in any::<bool>(),
         ) {
             let n = w * h;
-            let edges = crate::graphcut::grid_edges(h, w, 4).unwrap();
-            let p = Prob {
-                l,
-                unary: unary_seed[..n * l].to_vec(),
-                weights: weight_seed[..edges.len()].to_vec(),
-                edges,
-            };
+            let p = grid_prob(w, h, l, &unary_seed, &weight_seed);
             let tl = truncated_linear(l);
             let v = p.view(if metric { Some(&tl) } else { None });
             let init: Vec<i32> = (0..n).map(|i| ((i * 5 + 1) % l) as i32).collect();
@@ -1675,13 +1681,7 @@ mod tests {
             max_cycles in 1usize..5,
         ) {
             let n = w * h;
-            let edges = crate::graphcut::grid_edges(h, w, 4).unwrap();
-            let p = Prob {
-                l,
-                unary: unary_seed[..n * l].to_vec(),
-                weights: weight_seed[..edges.len()].to_vec(),
-                edges,
-            };
+            let p = grid_prob(w, h, l, &unary_seed, &weight_seed);
             let v = p.view(None);
             let init: Vec<i32> = (0..n).map(|i| ((i * 3 + 1) % l) as i32).collect();
             let cfg = MoveConfig { max_cycles };
