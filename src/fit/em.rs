@@ -30,6 +30,7 @@ use crate::body::residuals::{to_f64, PoseGeometry};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::cloud::PixelGraph;
 use crate::error::{ensure, Error, Result};
+use crate::graphcut::expansion::potts_candidate_mask;
 use crate::graphcut::{CrfProblem, CrfSolver, MoveConfig};
 use rayon::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -291,7 +292,7 @@ pub fn unary_costs(
     tau: f64,
     unary: &mut [f64],
 ) {
-    fill_unary(model, points, pose, config, tau, None, unary);
+    fill_unary(model, points, pose, config, tau, None, unary, None);
 }
 
 /// What an E-step knows before its unary terms: each point's label (0..=[`OUTLIER`])
@@ -324,13 +325,22 @@ pub fn unary_costs_for_labels(
     held: HeldLabels<'_>,
     unary: &mut [f64],
 ) {
-    fill_unary(model, points, pose, config, tau, Some(held), unary);
+    fill_unary(model, points, pose, config, tau, Some(held), unary, None);
 }
 
 /// Relative margin of the skip test of [`unary_costs_for_labels`], so that rounding
 /// never skips a term the expansion's own test (with the exact term) would admit.
 const SKIP_MARGIN: f64 = 1e-9;
 
+/// No work beside an expansion's cycles.
+const NO_WORK_BESIDE: Option<&mut fn(&[i32], &AtomicBool)> = None;
+
+/// Words of candidate sets per chunk of points (see [`EStep::set_pose`]).
+const CANDIDATE_WORDS_PER_CHUNK: usize = CHUNK_POINTS / 64 * NUM_LABELS;
+
+/// The unary terms; with `held` and `candidates`, also the expansion's candidate sets
+/// for the held labels (see `CrfSolver::expansion_with`).
+#[allow(clippy::too_many_arguments)]
 fn fill_unary(
     model: &BodyModel,
     points: &[[f32; 3]],
@@ -339,23 +349,41 @@ fn fill_unary(
     tau: f64,
     held: Option<HeldLabels<'_>>,
     unary: &mut [f64],
+    candidates: Option<&mut [u64]>,
 ) {
+    const _: () = assert!(CHUNK_POINTS.is_multiple_of(64));
     let geo = PoseGeometry::new(model, pose);
     let pc = config.point_cost(tau);
-    let chunk = |u: &mut [f64], pts: &[[f32; 3]], held: Option<(&[i32], &[f64], &mut [u32])>| {
-        unary_chunk(&geo, &pc, config.outlier_cost(tau), u, pts, held)
+    let chunk = |u: &mut [f64],
+                 pts: &[[f32; 3]],
+                 held: Option<(&[i32], &[f64], &mut [u32])>,
+                 words: Option<&mut [u64]>| {
+        unary_chunk(&geo, &pc, config.outlier_cost(tau), u, pts, held, words)
     };
     let rows = unary.par_chunks_mut(CHUNK_POINTS * NUM_LABELS);
     let pts = points.par_chunks(CHUNK_POINTS);
     match held {
-        None => rows.zip(pts).for_each(|(u, p)| chunk(u, p, None)),
+        None => rows.zip(pts).for_each(|(u, p)| chunk(u, p, None, None)),
         Some(h) => {
             debug_assert!(h.labels.len() == points.len() && h.slack.len() == points.len());
-            rows.zip(pts)
+            let chunks = rows
+                .zip(pts)
                 .zip(h.labels.par_chunks(CHUNK_POINTS))
                 .zip(h.slack.par_chunks(CHUNK_POINTS))
-                .zip(h.skipped.par_chunks_mut(CHUNK_POINTS))
-                .for_each(|((((u, p), l), w), sk)| chunk(u, p, Some((l, w, sk))))
+                .zip(h.skipped.par_chunks_mut(CHUNK_POINTS));
+            match candidates {
+                None => {
+                    chunks.for_each(|((((u, p), l), w), sk)| chunk(u, p, Some((l, w, sk)), None))
+                }
+                Some(words) => {
+                    debug_assert_eq!(words.len(), points.len().div_ceil(64) * NUM_LABELS);
+                    chunks
+                        .zip(words.par_chunks_mut(CANDIDATE_WORDS_PER_CHUNK))
+                        .for_each(|(((((u, p), l), w), sk), cw)| {
+                            chunk(u, p, Some((l, w, sk)), Some(cw))
+                        })
+                }
+            }
         }
     }
 }
@@ -368,8 +396,10 @@ fn unary_chunk(
     u: &mut [f64],
     pts: &[[f32; 3]],
     held: Option<(&[i32], &[f64], &mut [u32])>,
+    candidate_words: Option<&mut [u64]>,
 ) {
     let cap = pc.cap();
+    let labels_and_slack = held.as_ref().map(|(l, w, _)| (*l, *w));
     let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
     let buf = to_f64(pts, &mut buf);
     // Per point: its label (none: −1) and the most another label may cost and still be
@@ -493,6 +523,20 @@ fn unary_chunk(
         });
         e.signed_distances_batched(items, |i, d| u[i * NUM_LABELS + k] = pc.cost(d));
     }
+    // The expansion's candidate sets from the finished rows: bit i % 64 of word
+    // (i / 64, a) where point i may switch to label a.
+    if let (Some(words), Some((labels, slack))) = (candidate_words, labels_and_slack) {
+        words.fill(0);
+        for (i, (&l, &w)) in labels.iter().zip(slack).enumerate() {
+            let row = &u[i * NUM_LABELS..(i + 1) * NUM_LABELS];
+            let mut mask = potts_candidate_mask(row, l.clamp(0, OUTLIER) as usize, w);
+            let block = &mut words[i / 64 * NUM_LABELS..(i / 64 + 1) * NUM_LABELS];
+            while mask != 0 {
+                block[mask.trailing_zeros() as usize] |= 1 << (i % 64);
+                mask &= mask - 1;
+            }
+        }
+    }
 }
 
 /// After an E-step on terms from [`unary_costs_for_labels`]: the exact cost of every
@@ -607,6 +651,12 @@ struct EStep<'g> {
     tau: f64,
     solver: CrfSolver<f64>,
     moves: MoveConfig,
+    /// The expansion's candidate sets for `candidates_for` (words as
+    /// `CrfSolver::expansion_with` takes them), computed with `unary`; valid until
+    /// `unary` changes otherwise.
+    candidate_words: Vec<u64>,
+    candidates_for: Vec<i32>,
+    candidates_valid: bool,
 }
 
 impl<'g> EStep<'g> {
@@ -632,11 +682,16 @@ impl<'g> EStep<'g> {
             moves: MoveConfig {
                 max_cycles: config.expansion_cycles,
             },
+            candidate_words: vec![0; n.div_ceil(64) * NUM_LABELS],
+            candidates_for: Vec::with_capacity(n),
+            candidates_valid: false,
         })
     }
 
     /// The unary terms of `points` at `pose` and outlier distance `tau`: all of them,
-    /// or with `labels` (the labels the next expansion starts from) those it can use.
+    /// or with `labels` (the labels the next expansion starts from) those it can use,
+    /// and then also the expansion's candidate sets for `labels` (computed in the same
+    /// parallel pass, so that the expansion need not collect them on one thread).
     fn set_pose(
         &mut self,
         model: &BodyModel,
@@ -648,24 +703,33 @@ impl<'g> EStep<'g> {
     ) {
         self.pose = *pose;
         self.tau = tau;
+        self.candidates_valid = false;
         match labels {
             None => {
                 self.skipped.fill(0);
                 unary_costs(model, points, pose, config, tau, &mut self.unary)
             }
-            Some(labels) => unary_costs_for_labels(
-                model,
-                points,
-                pose,
-                config,
-                tau,
-                HeldLabels {
+            Some(labels) => {
+                let held = HeldLabels {
                     labels,
                     slack: &self.slack,
                     skipped: &mut self.skipped,
-                },
-                &mut self.unary,
-            ),
+                };
+                let words = Some(&mut self.candidate_words[..]);
+                fill_unary(
+                    model,
+                    points,
+                    pose,
+                    config,
+                    tau,
+                    Some(held),
+                    &mut self.unary,
+                    words,
+                );
+                self.candidates_for.clear();
+                self.candidates_for.extend_from_slice(labels);
+                self.candidates_valid = true;
+            }
         }
     }
 
@@ -696,9 +760,13 @@ impl<'g> EStep<'g> {
         init: &[i32],
     ) -> Result<Vec<i32>> {
         let p = problem(&self.unary, &self.graph.edges, &self.weights);
+        // The candidate sets, if computed for `init` (see `set_pose`).
+        let candidates = (self.candidates_valid && self.candidates_for == init)
+            .then_some(&self.candidate_words[..]);
         let labels = self
             .solver
-            .alpha_expansion(&p, Some(init), &self.moves)?
+            .expansion_with(&p, Some(init), &self.moves, candidates, NO_WORK_BESIDE)?
+            .0
             .labels;
         self.settle(model, points, config, &labels);
         Ok(labels)
@@ -716,9 +784,12 @@ impl<'g> EStep<'g> {
         beside: &mut (impl FnMut(&[i32], &AtomicBool) -> R + Send),
     ) -> Result<(Vec<i32>, Option<R>)> {
         let p = problem(&self.unary, &self.graph.edges, &self.weights);
+        // The candidate sets, if computed for `init` (see `set_pose`).
+        let candidates = (self.candidates_valid && self.candidates_for == init)
+            .then_some(&self.candidate_words[..]);
         let (labelling, output) =
             self.solver
-                .alpha_expansion_beside(&p, Some(init), &self.moves, beside)?;
+                .expansion_with(&p, Some(init), &self.moves, candidates, Some(beside))?;
         self.settle(model, points, config, &labelling.labels);
         Ok((labelling.labels, output))
     }
@@ -731,6 +802,7 @@ impl<'g> EStep<'g> {
         config: &EmConfig,
         labels: &[i32],
     ) {
+        self.candidates_valid = false;
         settle_unary(
             model,
             points,
@@ -1291,6 +1363,72 @@ mod tests {
     /// With labels: the own label's term exact; every other term exact or, where
     /// skipped, the cap with an exact cost beyond the own cost plus the slack (out of
     /// the expansion's reach); `settle_unary` makes the labels' terms exact.
+    /// The candidate sets the E-step computes in its unary pass are those the
+    /// solver collects itself, and the expansion from them ends where the solver's own
+    /// does.
+    #[test]
+    fn e_step_candidate_sets_are_the_solvers() {
+        use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
+        let model = BodyModel::default();
+        let cam = crate::Camera::itop();
+        let mut truth = BodyModel::neutral_pose();
+        truth[2] = 2.3;
+        truth[crate::body::param::R_ELBOW] = 0.9;
+        let (depth, _) = model.render_depth(&truth, &cam);
+        let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
+        let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
+        let graph = neighbour_graph(&cloud, Connectivity::Four);
+        let (points, n) = (&cloud.points, cloud.len());
+        assert_ne!(
+            n % 64,
+            0,
+            "a last block of 64 points that is only partly used"
+        );
+        let config = EmConfig::default();
+        let tau = config.outlier_distance_at(0);
+        let mut crf = EStep::new(&graph, n, &config).unwrap();
+        let start = crate::fit::tests::perturbed(&truth, 3, 0.2, 0.05);
+        crf.set_pose(&model, points, &start, &config, tau, None);
+        assert!(!crf.candidates_valid);
+        let cheapest = crf.cheapest_labels();
+        let labels = crf.expand(&model, points, &config, &cheapest).unwrap();
+        // Also labels off the E-step's result: every 7th point moved to another label.
+        let mixed: Vec<i32> = labels
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| {
+                if i % 7 == 0 {
+                    (l + 3) % NUM_LABELS as i32
+                } else {
+                    l
+                }
+            })
+            .collect();
+        let near = crate::fit::tests::perturbed(&truth, 4, 0.1, 0.02);
+        for held in [&labels, &mixed] {
+            crf.set_pose(&model, points, &near, &config, tau, Some(held));
+            assert!(crf.candidates_valid);
+            let p = problem(&crf.unary, &graph.edges, &crf.weights);
+            let mut solver = CrfSolver::new(n, &graph.edges).unwrap();
+            let want = solver.collected_candidate_words(&p, held);
+            let members: u32 = want.iter().map(|w| w.count_ones()).sum();
+            assert!(members as usize > n / 10, "{members} candidates");
+            assert_eq!(crf.candidate_words, want);
+            let moves = MoveConfig {
+                max_cycles: config.expansion_cycles,
+            };
+            let own = solver
+                .alpha_expansion(&p, Some(held), &moves)
+                .unwrap()
+                .labels;
+            assert_eq!(crf.expand(&model, points, &config, held).unwrap(), own);
+            assert!(
+                !crf.candidates_valid,
+                "the settled terms are not the sets' terms"
+            );
+        }
+    }
+
     #[test]
     fn unary_for_labels_skips_only_terms_out_of_reach() {
         let model = BodyModel::default();

@@ -25,6 +25,10 @@ impl BitSet {
     pub(crate) fn word(&self, k: usize) -> u64 {
         self.0[k]
     }
+    #[inline(always)]
+    pub(crate) fn set_word(&mut self, k: usize, bits: u64) {
+        self.0[k] = bits;
+    }
     pub(crate) fn clear_all(&mut self) {
         self.0.fill(0);
     }

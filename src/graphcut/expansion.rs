@@ -540,6 +540,20 @@ pub fn alpha_beta_swap<C: Cost>(
     CrfSolver::new(n, problem.edges)?.alpha_beta_swap(problem, init, config)
 }
 
+/// The labels a node labelled `own`, with unary row `row` and sum of edge weights
+/// `slack`, may switch to in an expansion move on a Potts problem with nothing
+/// forbidden (bit per label): those whose unary exceeds its own by at most `slack`,
+/// the exact pruning test of the moves (`CrfSolver::expansion_move`).
+#[inline(always)]
+pub fn potts_candidate_mask<C: Cost>(row: &[C], own: usize, slack: C) -> u64 {
+    let base = row[own];
+    let mask = row
+        .iter()
+        .enumerate()
+        .fold(0u64, |m, (a, &u)| m | (((u - base <= slack) as u64) << a));
+    mask & !(1u64 << own)
+}
+
 /// The state of one `alpha_expansion` call between its cycles.
 struct ExpansionRun<C: Cost> {
     labels: Vec<i32>,
@@ -568,6 +582,10 @@ pub struct CrfSolver<C: Cost> {
     /// Per node: the sum of its edges' weights, `None` on overflow (see
     /// `expansion_move`).
     incident_weight: Vec<Option<C>>,
+    /// Every `incident_weight` is finite (set with it).
+    weights_finite: bool,
+    /// The edge weights `incident_weight` was summed from (none yet).
+    weights_of_sums: Option<Vec<C>>,
     /// Per node, in the current expansion move: may switch to α (not labelled α, not
     /// pruned). Only free nodes are in the cut. All false between moves.
     is_free: Vec<bool>,
@@ -645,6 +663,8 @@ impl<C: Cost> CrfSolver<C> {
             e0: vec![C::ZERO; n_nodes],
             e1: vec![C::ZERO; n_nodes],
             incident_weight: vec![None; n_nodes],
+            weights_finite: false,
+            weights_of_sums: None,
             is_free: vec![false; n_nodes],
             candidates: Vec::new(),
             free: Vec::new(),
@@ -693,7 +713,7 @@ impl<C: Cost> CrfSolver<C> {
         init: Option<&[i32]>,
         config: &MoveConfig,
     ) -> Result<Labelling<C>> {
-        self.expansion_with(problem, init, config, None::<&mut Never>)
+        self.expansion_with(problem, init, config, None, None::<&mut Never>)
             .map(|(labelling, _)| labelling)
     }
 
@@ -718,14 +738,24 @@ impl<C: Cost> CrfSolver<C> {
         R: Send,
         F: FnMut(&[i32], &AtomicBool) -> R + Send,
     {
-        self.expansion_with(problem, init, config, Some(beside))
+        self.expansion_with(problem, init, config, None, Some(beside))
     }
 
-    fn expansion_with<R, F>(
+    /// [`Self::alpha_expansion`] (with `beside`, [`Self::alpha_expansion_beside`]); with
+    /// `candidates`, the per-label candidate sets the expansion starts from, computed
+    /// by the caller (in parallel, where it computes the unary terms): for each block
+    /// of 64 nodes `w` and label `a`, `candidates[w * l + a]` has bit `b` set where
+    /// node `64w + b`'s [`potts_candidate_mask`] (of its unary row, its `init` label
+    /// and its sum of edge weights in edge order) has bit `a` set. They are used when
+    /// the problem takes that form (Potts, nothing forbidden, at most 64 labels,
+    /// pruning on, finite weight sums), else the sets are collected here. Wrong sets
+    /// give a wrong labelling, hence crate-only.
+    pub(crate) fn expansion_with<R, F>(
         &mut self,
         problem: &CrfProblem<C>,
         init: Option<&[i32]>,
         config: &MoveConfig,
+        candidates: Option<&[u64]>,
         mut beside: Option<&mut F>,
     ) -> Result<(Labelling<C>, Option<R>)>
     where
@@ -735,7 +765,16 @@ impl<C: Cost> CrfSolver<C> {
         let c = self.check(problem, true)?;
         let labels = c.check_init(init)?;
         self.prepare_expansion(&c);
-        self.collect_candidates(&c, &labels);
+        match candidates {
+            Some(words)
+                if self.masks_apply(&c)
+                    && init.is_some()
+                    && words.len() == c.n.div_ceil(64) * c.l =>
+            {
+                self.set_candidates(&c, words)
+            }
+            _ => self.collect_candidates(&c, &labels),
+        }
         self.candidate.copy_from_slice(&labels);
         let e = c.energy(&labels);
         let mut run = ExpansionRun {
@@ -859,6 +898,14 @@ impl<C: Cost> CrfSolver<C> {
 
     /// Per-problem set-up of the expansion moves: each node's sum of edge weights.
     fn prepare_expansion(&mut self, c: &Checked<C>) {
+        // The edges are the solver's; with the weights of the last call the sums are
+        // those already there (the EM's E-steps all have the same weights).
+        if self.weights_of_sums.as_deref() == Some(c.weights) {
+            return;
+        }
+        let kept = self.weights_of_sums.get_or_insert_with(Vec::new);
+        kept.clear();
+        kept.extend_from_slice(c.weights);
         self.incident_weight.fill(Some(C::ZERO));
         for (&[i, j], &w) in c.edges.iter().zip(c.weights) {
             if i != j {
@@ -866,6 +913,41 @@ impl<C: Cost> CrfSolver<C> {
                     self.incident_weight[x] =
                         self.incident_weight[x].and_then(|s| s.checked_add(w));
                 }
+            }
+        }
+        self.weights_finite = self.incident_weight.iter().all(Option::is_some);
+    }
+
+    /// Whether every node's candidate labels are its [`potts_candidate_mask`] (the
+    /// fast path of `add_candidate` for every node).
+    fn masks_apply(&self, c: &Checked<C>) -> bool {
+        self.prune && c.potts && c.big == C::ZERO && c.l <= 64 && self.weights_finite
+    }
+
+    /// The candidate sets an expansion of `problem` from `labels` collects, as the
+    /// words [`Self::expansion_with`] takes (for tests of callers that compute them).
+    #[cfg(test)]
+    pub(crate) fn collected_candidate_words(
+        &mut self,
+        problem: &CrfProblem<C>,
+        labels: &[i32],
+    ) -> Vec<u64> {
+        let c = self.check(problem, true).unwrap();
+        assert!(self.prune && c.potts);
+        self.prepare_expansion(&c);
+        self.collect_candidates(&c, labels);
+        let n_words = c.n.div_ceil(64);
+        (0..n_words * c.l)
+            .map(|k| self.candidates[k % c.l].word(k / c.l))
+            .collect()
+    }
+
+    /// The candidate sets from the caller's words (see [`Self::expansion_with`]).
+    fn set_candidates(&mut self, c: &Checked<C>, words: &[u64]) {
+        self.candidates.resize_with(c.l, || BitSet::new(c.n));
+        for (a, set) in self.candidates.iter_mut().enumerate() {
+            for (w, block) in words.chunks_exact(c.l).enumerate() {
+                set.set_word(w, block[a]);
             }
         }
     }
@@ -909,13 +991,7 @@ impl<C: Cost> CrfSolver<C> {
         // for every α at once, as a bit mask (same arithmetic, same outcome).
         if self.prune && c.potts && c.big == C::ZERO && c.l <= 64 {
             if let Some(slack) = self.incident_weight[i] {
-                let row = &c.unary[i * c.l..(i + 1) * c.l];
-                let base = row[fi];
-                let mut mask = row
-                    .iter()
-                    .enumerate()
-                    .fold(0u64, |m, (a, &u)| m | (((u - base <= slack) as u64) << a));
-                mask &= !(1u64 << fi);
+                let mut mask = potts_candidate_mask(&c.unary[i * c.l..(i + 1) * c.l], fi, slack);
                 while mask != 0 {
                     self.candidates[mask.trailing_zeros() as usize].set(i);
                     mask &= mask - 1;
@@ -1703,6 +1779,34 @@ mod tests {
             prop_assert_eq!(output.is_some(), last_cycle_idle);
             if let Some(labels) = output {
                 prop_assert_eq!(&labels, &plain.labels);
+            }
+        }
+    }
+
+    proptest! {
+        /// One solver over problems that differ in their weights (the per-node weight
+        /// sums are kept from call to call while the weights stay the same) gives each
+        /// problem's one-shot labelling.
+        #[test]
+        fn reused_solver_follows_new_weights(
+            w in 2usize..7,
+            h in 2usize..7,
+            l in 2usize..5,
+            unary_seed in prop::collection::vec(0i64..40, 36 * 5),
+            weight_seeds in prop::collection::vec(prop::collection::vec(0i64..12, 72), 3),
+        ) {
+            let n = w * h;
+            let problems: Vec<Prob> = weight_seeds
+                .iter()
+                .map(|ws| grid_prob(w, h, l, &unary_seed, ws))
+                .collect();
+            let init: Vec<i32> = (0..n).map(|i| ((i * 3 + 1) % l) as i32).collect();
+            let cfg = MoveConfig::default();
+            let mut s = CrfSolver::new(n, &problems[0].edges).unwrap();
+            for k in [0, 1, 1, 2, 0] {
+                let v = problems[k].view(None);
+                let reused = s.alpha_expansion(&v, Some(&init), &cfg).unwrap();
+                prop_assert_eq!(reused, alpha_expansion(&v, Some(&init), &cfg).unwrap());
             }
         }
     }
