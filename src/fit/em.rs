@@ -30,7 +30,7 @@ use crate::body::residuals::{to_f64, PoseGeometry};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::cloud::PixelGraph;
 use crate::error::{ensure, Error, Result};
-use crate::graphcut::expansion::potts_candidate_mask;
+use crate::graphcut::expansion::{potts_candidate_mask, NO_WORK_BESIDE};
 use crate::graphcut::{CrfProblem, CrfSolver, MoveConfig};
 use rayon::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -331,9 +331,6 @@ pub fn unary_costs_for_labels(
 /// Relative margin of the skip test of [`unary_costs_for_labels`], so that rounding
 /// never skips a term the expansion's own test (with the exact term) would admit.
 const SKIP_MARGIN: f64 = 1e-9;
-
-/// No work beside an expansion's cycles.
-const NO_WORK_BESIDE: Option<&mut fn(&[i32], &AtomicBool)> = None;
 
 /// Words of candidate sets per chunk of points (see [`EStep::set_pose`]).
 const CANDIDATE_WORDS_PER_CHUNK: usize = CHUNK_POINTS / 64 * NUM_LABELS;
@@ -759,17 +756,8 @@ impl<'g> EStep<'g> {
         config: &EmConfig,
         init: &[i32],
     ) -> Result<Vec<i32>> {
-        let p = problem(&self.unary, &self.graph.edges, &self.weights);
-        // The candidate sets, if computed for `init` (see `set_pose`).
-        let candidates = (self.candidates_valid && self.candidates_for == init)
-            .then_some(&self.candidate_words[..]);
-        let labels = self
-            .solver
-            .expansion_with(&p, Some(init), &self.moves, candidates, NO_WORK_BESIDE)?
-            .0
-            .labels;
-        self.settle(model, points, config, &labels);
-        Ok(labels)
+        self.expand_with(model, points, config, init, NO_WORK_BESIDE)
+            .map(|(labels, _)| labels)
     }
 
     /// [`Self::expand`] with `beside` run beside its cycles after the first (see
@@ -783,13 +771,24 @@ impl<'g> EStep<'g> {
         init: &[i32],
         beside: &mut (impl FnMut(&[i32], &AtomicBool) -> R + Send),
     ) -> Result<(Vec<i32>, Option<R>)> {
+        self.expand_with(model, points, config, init, Some(beside))
+    }
+
+    fn expand_with<R: Send>(
+        &mut self,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        config: &EmConfig,
+        init: &[i32],
+        beside: Option<&mut (impl FnMut(&[i32], &AtomicBool) -> R + Send)>,
+    ) -> Result<(Vec<i32>, Option<R>)> {
         let p = problem(&self.unary, &self.graph.edges, &self.weights);
         // The candidate sets, if computed for `init` (see `set_pose`).
         let candidates = (self.candidates_valid && self.candidates_for == init)
             .then_some(&self.candidate_words[..]);
         let (labelling, output) =
             self.solver
-                .expansion_with(&p, Some(init), &self.moves, candidates, Some(beside))?;
+                .expansion_with(&p, Some(init), &self.moves, candidates, beside)?;
         self.settle(model, points, config, &labelling.labels);
         Ok((labelling.labels, output))
     }
@@ -934,6 +933,24 @@ fn m_step_ahead(
     Some((pose, report))
 }
 
+/// The next M-step (from `start`, at `point_cost`) as the work beside an expansion's
+/// cycles, for the labels each cycle starts from (see `EStep::expand_beside`); counts
+/// its runs in `runs`. Its free-space term is its own (see `run_hard_em`).
+fn m_step_beside<'s, 'd: 's>(
+    lm: &'s mut LevenbergMarquardt,
+    objective: &'s mut PointObjective<'d>,
+    free_space: &'s mut Option<FreeSpaceTerm<'d>>,
+    prior: Option<&'s PosePrior>,
+    (start, point_cost): (Pose, PointCost),
+    runs: &'s mut usize,
+) -> impl FnMut(&[i32], &AtomicBool) -> Option<(Pose, LmReport)> + Send + use<'s, 'd> {
+    move |seen, abandon| {
+        *runs += 1;
+        let fs = free_space.as_mut().map(|f| &*f);
+        m_step_ahead(lm, objective, seen, point_cost, prior, fs, &start, abandon)
+    }
+}
+
 /// M-steps run beside an E-step, and how many of them were used (they had the labels
 /// the E-step ended with); the others were discarded or abandoned.
 #[derive(Debug, Default, Clone, Copy, PartialEq)]
@@ -1048,15 +1065,14 @@ fn run_hard_em(
             crf.set_pose(model, points, &pose, config, tau, None);
             let cheapest = crf.cheapest_labels();
             if m_steps_ahead && iterations < config.max_iterations {
-                let point_cost = config.point_cost(tau);
-                let (start, fs) = (pose, &mut free_space_ahead);
-                let (lm, objective) = (&mut lm, &mut objective);
-                let runs = &mut ahead.run;
-                let mut beside = |seen: &[i32], abandon: &AtomicBool| {
-                    *runs += 1;
-                    let fs = fs.as_mut().map(|f| &*f);
-                    m_step_ahead(lm, objective, seen, point_cost, prior, fs, &start, abandon)
-                };
+                let mut beside = m_step_beside(
+                    &mut lm,
+                    &mut objective,
+                    &mut free_space_ahead,
+                    prior,
+                    (pose, config.point_cost(tau)),
+                    &mut ahead.run,
+                );
                 let (labels, m_step) =
                     crf.expand_beside(model, points, config, &cheapest, &mut beside)?;
                 // The first M-step's labels are these.
@@ -1130,13 +1146,14 @@ fn run_hard_em(
             );
             (new_labels?, Some(RunAhead::ForOldLabels(m_step_done)))
         } else if may_run_ahead {
-            let (start, fs) = (pose, &mut free_space_ahead);
-            let (lm, objective, runs) = (&mut lm, &mut objective, &mut ahead.run);
-            let mut beside = |seen: &[i32], abandon: &AtomicBool| {
-                *runs += 1;
-                let fs = fs.as_mut().map(|f| &*f);
-                m_step_ahead(lm, objective, seen, point_cost, prior, fs, &start, abandon)
-            };
+            let mut beside = m_step_beside(
+                &mut lm,
+                &mut objective,
+                &mut free_space_ahead,
+                prior,
+                (pose, point_cost),
+                &mut ahead.run,
+            );
             let (new_labels, m_step_done) =
                 crf.expand_beside(model, points, config, &labels, &mut beside)?;
             (
@@ -1207,13 +1224,21 @@ mod tests {
     use crate::body::kinematics::tests::pose_for_tests;
     use crate::body::signed_distance_to_ellipsoid;
 
+    /// The cloud of a depth image and its 4-neighbour graph.
+    fn cloud_and_graph(depth: &[f32], cam: &crate::Camera) -> (crate::cloud::Cloud, PixelGraph) {
+        use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
+        let view = DepthView::new(depth, cam.height, cam.width, "depth").unwrap();
+        let cloud = Cloud::from_depth(&view, cam, None).unwrap();
+        let graph = neighbour_graph(&cloud, Connectivity::Four);
+        (cloud, graph)
+    }
+
     /// Running late M-steps beside the E-step before them changes nothing: the same
     /// pose, labels, energies and iterations as one step after the other, with and
     /// without the free-space term and from several starts; and it does happen.
     #[test]
     fn m_steps_run_ahead_give_the_same_em() {
         use crate::body::param;
-        use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
         let model = BodyModel::default();
         let cam = crate::Camera::itop();
         let mut truth = BodyModel::neutral_pose();
@@ -1224,13 +1249,7 @@ mod tests {
         truth[param::L_SHOULDER + 1] = 0.3;
         truth[param::R_KNEE] = 0.4;
         let (depth, _) = model.render_depth(&truth, &cam);
-        let cloud_and_graph = |depth: &[f32]| {
-            let view = DepthView::new(depth, cam.height, cam.width, "depth").unwrap();
-            let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
-            let graph = neighbour_graph(&cloud, Connectivity::Four);
-            (cloud, graph)
-        };
-        let (cloud, graph) = cloud_and_graph(&depth);
+        let (cloud, graph) = cloud_and_graph(&depth, &cam);
         let image = FreeSpaceImage {
             depth: &depth,
             camera: &cam,
@@ -1255,7 +1274,7 @@ mod tests {
                 }
             }
         }
-        let (patched_cloud, patched_graph) = cloud_and_graph(&patched);
+        let (patched_cloud, patched_graph) = cloud_and_graph(&patched, &cam);
         let slow_anneal = EmConfig {
             anneal_iterations: 12,
             max_iterations: 16,
@@ -1360,24 +1379,18 @@ mod tests {
         }
     }
 
-    /// With labels: the own label's term exact; every other term exact or, where
-    /// skipped, the cap with an exact cost beyond the own cost plus the slack (out of
-    /// the expansion's reach); `settle_unary` makes the labels' terms exact.
     /// The candidate sets the E-step computes in its unary pass are those the
     /// solver collects itself, and the expansion from them ends where the solver's own
     /// does.
     #[test]
     fn e_step_candidate_sets_are_the_solvers() {
-        use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
         let model = BodyModel::default();
         let cam = crate::Camera::itop();
         let mut truth = BodyModel::neutral_pose();
         truth[2] = 2.3;
         truth[crate::body::param::R_ELBOW] = 0.9;
         let (depth, _) = model.render_depth(&truth, &cam);
-        let view = DepthView::new(&depth, cam.height, cam.width, "depth").unwrap();
-        let cloud = Cloud::from_depth(&view, &cam, None).unwrap();
-        let graph = neighbour_graph(&cloud, Connectivity::Four);
+        let (cloud, graph) = cloud_and_graph(&depth, &cam);
         let (points, n) = (&cloud.points, cloud.len());
         assert_ne!(
             n % 64,
@@ -1429,6 +1442,9 @@ mod tests {
         }
     }
 
+    /// With labels: the own label's term exact; every other term exact or, where
+    /// skipped, the cap with an exact cost beyond the own cost plus the slack (out of
+    /// the expansion's reach); `settle_unary` makes the labels' terms exact.
     #[test]
     fn unary_for_labels_skips_only_terms_out_of_reach() {
         let model = BodyModel::default();

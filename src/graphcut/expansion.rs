@@ -566,8 +566,8 @@ struct ExpansionRun<C: Cost> {
     tried: usize,
 }
 
-/// The work beside the cycles when there is none (its type is never called).
-type Never = fn(&[i32], &AtomicBool);
+/// No work beside an expansion's cycles (for [`CrfSolver::expansion_with`]).
+pub(crate) const NO_WORK_BESIDE: Option<&mut fn(&[i32], &AtomicBool)> = None;
 
 /// Move-making solver for a fixed node set and edge list: the move graph is built once
 /// and only its capacities are reset for each move; buffers are reused across calls
@@ -713,7 +713,7 @@ impl<C: Cost> CrfSolver<C> {
         init: Option<&[i32]>,
         config: &MoveConfig,
     ) -> Result<Labelling<C>> {
-        self.expansion_with(problem, init, config, None, None::<&mut Never>)
+        self.expansion_with(problem, init, config, None, NO_WORK_BESIDE)
             .map(|(labelling, _)| labelling)
     }
 
