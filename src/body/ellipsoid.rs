@@ -714,6 +714,16 @@ impl SortedPlacement {
         self.level(y) >= b.level || y[0] * y[0] + y[1] * y[1] + y[2] * y[2] >= b.norm2
     }
 
+    /// [`Self::is_beyond`]`(&self.beyond(t), y)` for a threshold `t` > 0 (infinite:
+    /// false), with a multiplication by 1/e_min for the division: the same within a
+    /// rounding, and no division for loops whose threshold changes at every point.
+    #[inline]
+    pub fn lower_bound_passes(&self, y: &[f64; 3], t: f64) -> bool {
+        let s = 1.0 + t * self.sorted.inv_e[2];
+        let r = self.sorted.e[0] + t;
+        self.level(y) >= s * s || y[0] * y[0] + y[1] * y[1] + y[2] * y[2] >= r * r
+    }
+
     /// [`Self::local`] and [`Self::is_beyond`] of many camera-frame points at once, the
     /// points given one coordinate per slice: `local[r][i]` and `beyond[i]` for point
     /// `i < beyond.len()`, bit for bit the one-point values, several points to a vector
@@ -1258,7 +1268,12 @@ mod tests {
                 if t <= 0.0 || (lower - t).abs() > tie * (1.0 + t) {
                     prop_assert_eq!(fast.is_beyond(&fast.beyond(t), &yl), lower >= t, "t {}", t);
                 }
+                // The same with the division by e_min as a multiplication (t > 0).
+                if t > 0.0 && (lower - t).abs() > tie * (1.0 + t) {
+                    prop_assert_eq!(fast.lower_bound_passes(&yl, t), lower >= t, "t {}", t);
+                }
             }
+            prop_assert!(!fast.lower_bound_passes(&yl, f64::INFINITY));
             // Many points at once: the same local coordinates and test, bit for bit.
             let cloud: Vec<[f64; 3]> = (0..11)
                 .map(|k| {

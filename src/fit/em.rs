@@ -292,7 +292,7 @@ pub fn unary_costs(
     tau: f64,
     unary: &mut [f64],
 ) {
-    fill_unary(model, points, pose, config, tau, None, unary, None);
+    fill_unary(model, points, pose, config, tau, None, None, unary, None);
 }
 
 /// What an E-step knows before its unary terms: each point's label (0..=[`OUTLIER`])
@@ -325,7 +325,17 @@ pub fn unary_costs_for_labels(
     held: HeldLabels<'_>,
     unary: &mut [f64],
 ) {
-    fill_unary(model, points, pose, config, tau, Some(held), unary, None);
+    fill_unary(
+        model,
+        points,
+        pose,
+        config,
+        tau,
+        Some(held),
+        None,
+        unary,
+        None,
+    );
 }
 
 /// Relative margin of the skip test of [`unary_costs_for_labels`], so that rounding
@@ -336,7 +346,10 @@ const SKIP_MARGIN: f64 = 1e-9;
 const CANDIDATE_WORDS_PER_CHUNK: usize = CHUNK_POINTS / 64 * NUM_LABELS;
 
 /// The unary terms; with `held` and `candidates`, also the expansion's candidate sets
-/// for the held labels (see `CrfSolver::expansion_with`).
+/// for the held labels (see `CrfSolver::expansion_with`). With `held`, `own` may give
+/// each point's signed distance to its held label's ellipsoid at `pose` (as
+/// [`PointObjective::kept_distances`] writes them; read only at points held at a
+/// segment), which are then not computed again.
 #[allow(clippy::too_many_arguments)]
 fn fill_unary(
     model: &BodyModel,
@@ -345,39 +358,53 @@ fn fill_unary(
     config: &EmConfig,
     tau: f64,
     held: Option<HeldLabels<'_>>,
+    own: Option<&[f64]>,
     unary: &mut [f64],
     candidates: Option<&mut [u64]>,
 ) {
     const _: () = assert!(CHUNK_POINTS.is_multiple_of(64));
     let geo = PoseGeometry::new(model, pose);
     let pc = config.point_cost(tau);
-    let chunk = |u: &mut [f64],
+    let chunk = |c: usize,
+                 u: &mut [f64],
                  pts: &[[f32; 3]],
                  held: Option<(&[i32], &[f64], &mut [u32])>,
                  words: Option<&mut [u64]>| {
-        unary_chunk(&geo, &pc, config.outlier_cost(tau), u, pts, held, words)
+        let own = own.map(|d| &d[c * CHUNK_POINTS..c * CHUNK_POINTS + pts.len()]);
+        unary_chunk(
+            &geo,
+            &pc,
+            config.outlier_cost(tau),
+            u,
+            pts,
+            held,
+            own,
+            words,
+        )
     };
     let rows = unary.par_chunks_mut(CHUNK_POINTS * NUM_LABELS);
-    let pts = points.par_chunks(CHUNK_POINTS);
+    let pts = points.par_chunks(CHUNK_POINTS).enumerate();
     match held {
-        None => rows.zip(pts).for_each(|(u, p)| chunk(u, p, None, None)),
+        None => rows
+            .zip(pts)
+            .for_each(|(u, (c, p))| chunk(c, u, p, None, None)),
         Some(h) => {
             debug_assert!(h.labels.len() == points.len() && h.slack.len() == points.len());
+            debug_assert!(own.is_none_or(|d| d.len() == points.len()));
             let chunks = rows
                 .zip(pts)
                 .zip(h.labels.par_chunks(CHUNK_POINTS))
                 .zip(h.slack.par_chunks(CHUNK_POINTS))
                 .zip(h.skipped.par_chunks_mut(CHUNK_POINTS));
             match candidates {
-                None => {
-                    chunks.for_each(|((((u, p), l), w), sk)| chunk(u, p, Some((l, w, sk)), None))
-                }
+                None => chunks
+                    .for_each(|((((u, (c, p)), l), w), sk)| chunk(c, u, p, Some((l, w, sk)), None)),
                 Some(words) => {
                     debug_assert_eq!(words.len(), points.len().div_ceil(64) * NUM_LABELS);
                     chunks
                         .zip(words.par_chunks_mut(CANDIDATE_WORDS_PER_CHUNK))
-                        .for_each(|(((((u, p), l), w), sk), cw)| {
-                            chunk(u, p, Some((l, w, sk)), Some(cw))
+                        .for_each(|(((((u, (c, p)), l), w), sk), cw)| {
+                            chunk(c, u, p, Some((l, w, sk)), Some(cw))
                         })
                 }
             }
@@ -386,6 +413,7 @@ fn fill_unary(
 }
 
 /// [`fill_unary`] for one chunk of points (see [`unary_costs_for_labels`] for `held`).
+#[allow(clippy::too_many_arguments)]
 fn unary_chunk(
     geo: &PoseGeometry,
     pc: &PointCost,
@@ -393,6 +421,7 @@ fn unary_chunk(
     u: &mut [f64],
     pts: &[[f32; 3]],
     held: Option<(&[i32], &[f64], &mut [u32])>,
+    own_distance: Option<&[f64]>,
     candidate_words: Option<&mut [u64]>,
 ) {
     let cap = pc.cap();
@@ -400,7 +429,7 @@ fn unary_chunk(
     let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
     let buf = to_f64(pts, &mut buf);
     // Per point: its label (none: −1) and the most another label may cost and still be
-    // within the expansion's reach.
+    // within the expansion's reach (then as the residual of that cost).
     let mut own = [-1i32; CHUNK_POINTS];
     let mut reach = [f64::INFINITY; CHUNK_POINTS];
     let mut skipped: &mut [u32] = &mut [];
@@ -435,18 +464,30 @@ fn unary_chunk(
             next[k] += 1;
         }
         for (k, e) in geo.segments.iter().enumerate() {
-            let mine = by_label[start[k]..start[k + 1]].iter().map(|&i| {
-                let i = i as usize;
-                (i, e.local(&buf[i]))
-            });
-            e.signed_distances_batched(mine, |i, d| {
+            let mine = &by_label[start[k]..start[k + 1]];
+            let mut own_cost = |i: usize, d: f64| {
                 let c = pc.cost(d);
                 u[i * NUM_LABELS + k] = c;
                 reach[i] = c + slack[i];
-            });
+            };
+            match own_distance {
+                // Known from the M-step that gave this pose.
+                Some(d) => mine
+                    .iter()
+                    .for_each(|&i| own_cost(i as usize, d[i as usize])),
+                None => e.signed_distances_batched(
+                    mine.iter()
+                        .map(|&i| (i as usize, e.local(&buf[i as usize]))),
+                    own_cost,
+                ),
+            }
         }
         for r in &mut reach[..labels.len()] {
             *r += SKIP_MARGIN * (1.0 + r.abs());
+            // From here on the reach as a residual: a term is certainly beyond it when
+            // the distance's lower bound passes this (ρ's inverse is exact to a
+            // rounding, far inside the margin).
+            *r = pc.residual_within(*r);
         }
     }
     let known = !skipped.is_empty();
@@ -500,14 +541,15 @@ fn unary_chunk(
             m += usize::from(!beyond[i] && own[i] != k as i32);
         }
         if known {
-            // Also the points whose cost is certainly beyond reach.
+            // Also the points whose cost is certainly beyond reach: whose distance's
+            // lower bound passes the reach as a residual (no square root, no division).
             // Branch-free: which points pass is data-dependent, and a branch per point
             // was mispredicted often enough to show in profiles.
             let mut kept = 0;
             for j in 0..m {
                 let i = near[j] as usize;
                 let y = [local[0][i], local[1][i], local[2][i]];
-                let skip = pc.cost(e.distance_lower_bound(&y)) > reach[i];
+                let skip = e.lower_bound_passes(&y, reach[i]);
                 skipped[i] |= u32::from(skip) << k;
                 near[kept] = near[j];
                 kept += usize::from(!skip);
@@ -657,7 +699,47 @@ struct EStep<'g> {
 }
 
 impl<'g> EStep<'g> {
+    /// Without unary terms yet (the fits start with [`Self::at_pose`]).
+    #[cfg(test)]
     fn new(graph: &'g PixelGraph, n: usize, config: &EmConfig) -> Result<Self> {
+        let solver = CrfSolver::new(n, &graph.edges)?;
+        Ok(Self::with_solver(graph, n, config, solver))
+    }
+
+    /// [`Self::new`] with its unary terms at `pose` and `tau` ([`Self::set_pose`]
+    /// with `labels`). The expansion solver's graph is built on one worker of rayon's
+    /// pool while the others compute the edge weights and the unary terms.
+    #[allow(clippy::too_many_arguments)]
+    fn at_pose(
+        graph: &'g PixelGraph,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        pose: &Pose,
+        config: &EmConfig,
+        tau: f64,
+        labels: Option<&[i32]>,
+    ) -> Result<Self> {
+        let n = points.len();
+        let (solver, mut crf) = rayon::join(
+            || CrfSolver::new(n, &graph.edges),
+            || {
+                // A solver for no nodes stands in until the real one is built.
+                let empty = CrfSolver::new(0, &[]).expect("no edges to check");
+                let mut crf = Self::with_solver(graph, n, config, empty);
+                crf.set_pose(model, points, pose, config, tau, labels, None);
+                crf
+            },
+        );
+        crf.solver = solver?;
+        Ok(crf)
+    }
+
+    fn with_solver(
+        graph: &'g PixelGraph,
+        n: usize,
+        config: &EmConfig,
+        solver: CrfSolver<f64>,
+    ) -> Self {
         let mut weights = Vec::with_capacity(graph.len());
         edge_weights(graph, config, &mut weights);
         let mut slack = vec![0.0; n];
@@ -667,7 +749,7 @@ impl<'g> EStep<'g> {
                 slack[j as usize] += w;
             }
         }
-        Ok(EStep {
+        EStep {
             graph,
             weights,
             slack,
@@ -675,20 +757,23 @@ impl<'g> EStep<'g> {
             skipped: vec![0; n],
             pose: [0.0; crate::body::NUM_PARAMS],
             tau: 0.0,
-            solver: CrfSolver::<f64>::new(n, &graph.edges)?,
+            solver,
             moves: MoveConfig {
                 max_cycles: config.expansion_cycles,
             },
             candidate_words: vec![0; n.div_ceil(64) * NUM_LABELS],
             candidates_for: Vec::with_capacity(n),
             candidates_valid: false,
-        })
+        }
     }
 
     /// The unary terms of `points` at `pose` and outlier distance `tau`: all of them,
     /// or with `labels` (the labels the next expansion starts from) those it can use,
     /// and then also the expansion's candidate sets for `labels` (computed in the same
     /// parallel pass, so that the expansion need not collect them on one thread).
+    /// With `labels`, `own` may give the points' distances to their labels' ellipsoids
+    /// at `pose` (see [`fill_unary`]).
+    #[allow(clippy::too_many_arguments)]
     fn set_pose(
         &mut self,
         model: &BodyModel,
@@ -697,6 +782,7 @@ impl<'g> EStep<'g> {
         config: &EmConfig,
         tau: f64,
         labels: Option<&[i32]>,
+        own: Option<&[f64]>,
     ) {
         self.pose = *pose;
         self.tau = tau;
@@ -720,6 +806,7 @@ impl<'g> EStep<'g> {
                     config,
                     tau,
                     Some(held),
+                    own,
                     &mut self.unary,
                     words,
                 );
@@ -836,8 +923,7 @@ pub fn label_points(
             format!("has {} labels for {n} points", init.len()),
         ));
     }
-    let mut crf = EStep::new(graph, n, config)?;
-    crf.set_pose(model, points, pose, config, tau, Some(init));
+    let mut crf = EStep::at_pose(graph, model, points, pose, config, tau, Some(init))?;
     let labels = crf.expand(model, points, config, init)?;
     let energy = crf.energy(&labels);
     Ok((PointLabels::new(labels), energy))
@@ -1023,7 +1109,30 @@ fn run_hard_em(
             format!("parameter {i} is not finite"),
         ));
     }
-    let mut crf = EStep::new(graph, n, config)?;
+    if let Some(r) = resume {
+        if r.labels.len() != n {
+            return Err(Error::invalid(
+                "resume",
+                format!("has {} labels for {n} points", r.labels.len()),
+            ));
+        }
+        if let Some(i) = r.labels.iter().position(|&l| !(0..=OUTLIER).contains(&l)) {
+            return Err(Error::invalid(
+                "resume",
+                format!(
+                    "label {} of point {i} is not a part or the outlier",
+                    r.labels[i]
+                ),
+            ));
+        }
+    }
+    let mut pose = BodyModel::clamp_pose(init);
+    let mut iterations = resume.map_or(0, |r| r.iterations);
+    let mut tau = config.outlier_distance_at(iterations);
+    // The unary terms at the start: for a resumed run those its labels need, else all
+    // of them (for the cheapest labels).
+    let resumed_labels = resume.map(|r| r.labels);
+    let mut crf = EStep::at_pose(graph, model, points, &pose, config, tau, resumed_labels)?;
     let mut lm = LevenbergMarquardt::new(config.lm)?;
     let mut ahead = MStepsAhead::default();
     // The pose-only terms of the energy: the prior and the free space.
@@ -1031,38 +1140,15 @@ fn run_hard_em(
         prior.map_or(0.0, |pr| pr.cost(p)) + free_space.as_ref().map_or(0.0, |f| f.cost(p))
     };
 
-    let mut pose = BodyModel::clamp_pose(init);
-    let mut iterations = resume.map_or(0, |r| r.iterations);
-    let mut tau = config.outlier_distance_at(iterations);
     // The first M-step, run beside the initial E-step (see the E-step below).
     let mut next_m_step: Option<(Pose, LmReport)> = None;
     // (Relabelled before each M-step.)
     let mut objective =
         PointObjective::new(model, points, &vec![OUTLIER; n], config.point_cost(tau));
-    let mut labels: Vec<i32> = match resume {
-        Some(r) => {
-            if r.labels.len() != n {
-                return Err(Error::invalid(
-                    "resume",
-                    format!("has {} labels for {n} points", r.labels.len()),
-                ));
-            }
-            if let Some(i) = r.labels.iter().position(|&l| !(0..=OUTLIER).contains(&l)) {
-                return Err(Error::invalid(
-                    "resume",
-                    format!(
-                        "label {} of point {i} is not a part or the outlier",
-                        r.labels[i]
-                    ),
-                ));
-            }
-            crf.set_pose(model, points, &pose, config, tau, Some(r.labels));
-            r.labels.to_vec()
-        }
+    let mut labels: Vec<i32> = match resumed_labels {
+        Some(labels) => labels.to_vec(),
         None => {
-            // Initial labels: the cheapest label of each point (all terms needed), then
-            // the CRF.
-            crf.set_pose(model, points, &pose, config, tau, None);
+            // Initial labels: the cheapest label of each point, then the CRF.
             let cheapest = crf.cheapest_labels();
             if m_steps_ahead && iterations < config.max_iterations {
                 let mut beside = m_step_beside(
@@ -1087,6 +1173,7 @@ fn run_hard_em(
     };
     let mut energy = crf.energy(&labels) + pose_cost(&pose);
     let mut trace = vec![energy];
+    let mut own_distance = vec![0.0; n];
     let mut termination = EmTermination::MaxIterations;
     // The label changes of the last E-step (none yet).
     let mut last_changed = None;
@@ -1107,7 +1194,20 @@ fn run_hard_em(
         // E(pose, τ), so the energy still never increases (checked, not assumed).
         let next_tau = config.outlier_distance_at(iterations);
         if pose_moved {
-            crf.set_pose(model, points, &new_pose, config, next_tau, Some(&labels));
+            // The points' own-label distances at the new pose, from the M-step's last
+            // evaluation (when it was at that pose: LM's last trial may have been a
+            // rejected one).
+            let own = objective.kept_distances(&new_pose, &labels, &mut own_distance);
+            let own = own.then_some(&own_distance[..]);
+            crf.set_pose(
+                model,
+                points,
+                &new_pose,
+                config,
+                next_tau,
+                Some(&labels),
+                own,
+            );
             let e = crf.energy(&labels) + pose_cost(&new_pose);
             if e <= energy {
                 pose = new_pose;
@@ -1115,13 +1215,13 @@ fn run_hard_em(
                 tau = next_tau;
             } else {
                 // Cannot happen in exact arithmetic; keep the better state.
-                crf.set_pose(model, points, &pose, config, tau, Some(&labels));
+                crf.set_pose(model, points, &pose, config, tau, Some(&labels), None);
             }
             trace.push(energy);
         }
         if next_tau != tau {
             tau = next_tau;
-            crf.set_pose(model, points, &pose, config, tau, Some(&labels));
+            crf.set_pose(model, points, &pose, config, tau, Some(&labels), None);
             energy = crf.energy(&labels) + pose_cost(&pose);
         }
         // E-step. The expansion runs on one core; the next M-step runs beside it on
@@ -1401,7 +1501,7 @@ mod tests {
         let tau = config.outlier_distance_at(0);
         let mut crf = EStep::new(&graph, n, &config).unwrap();
         let start = crate::fit::tests::perturbed(&truth, 3, 0.2, 0.05);
-        crf.set_pose(&model, points, &start, &config, tau, None);
+        crf.set_pose(&model, points, &start, &config, tau, None, None);
         assert!(!crf.candidates_valid);
         let cheapest = crf.cheapest_labels();
         let labels = crf.expand(&model, points, &config, &cheapest).unwrap();
@@ -1419,7 +1519,7 @@ mod tests {
             .collect();
         let near = crate::fit::tests::perturbed(&truth, 4, 0.1, 0.02);
         for held in [&labels, &mixed] {
-            crf.set_pose(&model, points, &near, &config, tau, Some(held));
+            crf.set_pose(&model, points, &near, &config, tau, Some(held), None);
             assert!(crf.candidates_valid);
             let p = problem(&crf.unary, &graph.edges, &crf.weights);
             let mut solver = CrfSolver::new(n, &graph.edges).unwrap();
@@ -1439,6 +1539,64 @@ mod tests {
                 !crf.candidates_valid,
                 "the settled terms are not the sets' terms"
             );
+        }
+    }
+
+    /// An E-step's terms with the own-label distances an M-step kept (at the pose it
+    /// ended at, for the labels it fitted) are the terms it computes without them:
+    /// unary terms, skipped terms and candidate sets, bit for bit, also at the smaller
+    /// τ of the iterations after.
+    #[test]
+    fn own_distances_from_the_m_step_give_the_same_terms() {
+        let model = BodyModel::default();
+        let cam = crate::Camera::itop();
+        let mut truth = BodyModel::neutral_pose();
+        truth[2] = 2.3;
+        truth[crate::body::param::L_KNEE] = 0.7;
+        let (depth, _) = model.render_depth(&truth, &cam);
+        let (cloud, graph) = cloud_and_graph(&depth, &cam);
+        let (points, n) = (&cloud.points, cloud.len());
+        let config = EmConfig::default();
+        let tau = config.outlier_distance_at(0);
+        let start = crate::fit::tests::perturbed(&truth, 5, 0.3, 0.08);
+        let mut crf = EStep::at_pose(&graph, &model, points, &start, &config, tau, None).unwrap();
+        let cheapest = crf.cheapest_labels();
+        let labels = crf.expand(&model, points, &config, &cheapest).unwrap();
+        // Every 9th point at a segment far from it, for distances beyond the truncation.
+        let labels: Vec<i32> = (labels.iter().enumerate())
+            .map(|(i, &l)| match i % 9 {
+                0 if l < OUTLIER => (l + 7) % NUM_SEGMENTS as i32,
+                _ => l,
+            })
+            .collect();
+        let mut objective = PointObjective::new(&model, points, &labels, config.point_cost(tau));
+        let mut lm = LevenbergMarquardt::new(config.lm).unwrap();
+        let (pose, report) = m_step(&mut lm, &mut objective, None, None, &start);
+        assert!(report.accepted > 0);
+        let mut own = vec![f64::NAN; n];
+        assert!(objective.kept_distances(&pose, &labels, &mut own));
+        let far = own.iter().filter(|d| d.is_infinite()).count();
+        let near = own.iter().filter(|d| d.is_finite()).count();
+        assert!(
+            far > 0 && near > n / 2,
+            "{far} beyond the truncation, {near} within"
+        );
+        for tau in [tau, config.outlier_distance_at(1), config.outlier_distance] {
+            let mut computed = EStep::new(&graph, n, &config).unwrap();
+            computed.set_pose(&model, points, &pose, &config, tau, Some(&labels), None);
+            let mut given = EStep::new(&graph, n, &config).unwrap();
+            given.set_pose(
+                &model,
+                points,
+                &pose,
+                &config,
+                tau,
+                Some(&labels),
+                Some(&own),
+            );
+            assert!(computed.unary == given.unary, "τ {tau}");
+            assert_eq!(computed.skipped, given.skipped, "τ {tau}");
+            assert_eq!(computed.candidate_words, given.candidate_words, "τ {tau}");
         }
     }
 

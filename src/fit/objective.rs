@@ -46,6 +46,23 @@ impl Loss {
         }
     }
 
+    /// The residual r ≥ 0 with ρ(r) = `v` (≥ 0): ρ's inverse on r ≥ 0, where it
+    /// increases.
+    #[inline]
+    pub fn rho_inverse(self, v: f64) -> f64 {
+        match self {
+            Loss::Squared => (2.0 * v).sqrt(),
+            Loss::Huber(d) => {
+                if v <= 0.5 * d * d {
+                    (2.0 * v).sqrt()
+                } else {
+                    v / d + 0.5 * d
+                }
+            }
+            Loss::Cauchy(d) => d * (2.0 * v / (d * d)).exp_m1().sqrt(),
+        }
+    }
+
     /// IRLS weight ρ'(r)/r.
     #[inline]
     pub fn weight(self, r: f64) -> f64 {
@@ -79,6 +96,17 @@ impl PointCost {
     #[inline]
     pub fn cost(&self, r: f64) -> f64 {
         self.loss.rho(r.abs().min(self.truncation)) / (self.sigma * self.sigma)
+    }
+
+    /// The largest residual whose cost is at most `c` (from ρ's inverse, so within a
+    /// rounding): infinite when even the cap is at most `c`.
+    #[inline]
+    pub fn residual_within(&self, c: f64) -> f64 {
+        if c >= self.cap() {
+            f64::INFINITY
+        } else {
+            self.loss.rho_inverse(c.max(0.0) * self.sigma * self.sigma)
+        }
     }
 
     /// The constant cost of a truncated residual.
@@ -141,6 +169,8 @@ pub struct PointObjective<'a> {
     model: &'a BodyModel,
     points: &'a [[f32; 3]],
     point_cost: PointCost,
+    /// The labels of the points (as given to `relabel`).
+    labels: Vec<i32>,
     /// Indices of the labelled points, by segment (ascending), in input order within.
     order: Vec<u32>,
     /// The segment of each entry of `order`.
@@ -168,6 +198,7 @@ impl<'a> PointObjective<'a> {
             model,
             points,
             point_cost,
+            labels: Vec::new(),
             order: Vec::new(),
             segment: Vec::new(),
             distance: Vec::new(),
@@ -182,8 +213,32 @@ impl<'a> PointObjective<'a> {
 
     /// New labels (and cost settings) for the same points, reusing the buffers: the EM
     /// loop calls this once per M-step instead of building a new objective.
+    ///
+    /// With the labels it has already, the kept evaluation stays (an EM whose E-step
+    /// left the labels as they were starts its next M-step at the pose the last one
+    /// ended at): its chunk costs are recomputed for a new `point_cost`, or it is
+    /// dropped if the truncation grows (a distance known only to pass the old
+    /// truncation need not pass a larger one).
     pub fn relabel(&mut self, labels: &[i32], point_cost: PointCost) {
         debug_assert_eq!(self.points.len(), labels.len());
+        if self.labels == labels {
+            if point_cost != self.point_cost {
+                if point_cost.truncation > self.point_cost.truncation {
+                    self.evaluated = None;
+                } else if self.evaluated.is_some() {
+                    self.distance
+                        .par_chunks(CHUNK_POINTS)
+                        .zip(self.partial_costs.par_iter_mut())
+                        .for_each(|(dist, cost)| {
+                            *cost = dist.iter().map(|&d| point_cost.cost(d)).sum()
+                        });
+                }
+                self.point_cost = point_cost;
+            }
+            return;
+        }
+        self.labels.clear();
+        self.labels.extend_from_slice(labels);
         self.order.resize(labels.len(), 0);
         let start = group_by_segment(labels, &mut self.order);
         let m = start[NUM_SEGMENTS];
@@ -204,6 +259,23 @@ impl<'a> PointObjective<'a> {
     /// Whether the kept evaluation is at `pose`.
     fn evaluated_at(&self, pose: &Pose) -> bool {
         self.evaluated.as_ref() == Some(pose)
+    }
+
+    /// When the kept evaluation is at `pose` for `labels`: writes each labelled
+    /// point's signed distance to its segment's ellipsoid into `out` (by point index;
+    /// the other entries are left as they are) and returns true. The values are those
+    /// of [`crate::body::ellipsoid::SortedPlacement::signed_distances_batched`] at `pose`, except
+    /// that a distance certainly beyond the truncation may be infinite (it costs the
+    /// cap either way, also under any smaller truncation). The E-step after an M-step
+    /// takes its points' own-label terms from here instead of computing them again.
+    pub fn kept_distances(&self, pose: &Pose, labels: &[i32], out: &mut [f64]) -> bool {
+        if !self.evaluated_at(pose) || self.labels != labels || out.len() != labels.len() {
+            return false;
+        }
+        for (&i, &d) in self.order.iter().zip(&self.distance) {
+            out[i as usize] = d;
+        }
+        true
     }
 
     /// Distances, normals and chunk costs at `pose` with its geometry `geo` (kept until
@@ -560,8 +632,10 @@ mod tests {
         }
     }
 
-    /// An objective relabelled (fewer, then more labelled points; other cost settings)
-    /// gives what a fresh objective for those labels gives, bit for bit.
+    /// An objective relabelled (fewer, then more labelled points; other cost settings;
+    /// the same labels with a smaller, then a larger truncation) gives what a fresh
+    /// objective for those labels gives, bit for bit. With the same labels the kept
+    /// evaluation stays exactly while the truncation does not grow.
     #[test]
     fn relabel_equals_a_fresh_objective() {
         let model = BodyModel::default();
@@ -584,10 +658,102 @@ mod tests {
         };
         let mut reused = PointObjective::new(&model, &pts, &labels, pc(0.3));
         system(&mut reused);
-        for (labs, t) in [(&fewer, 0.2), (&labels, 0.25)] {
+        let steps = [
+            (&fewer, 0.2, false),
+            (&labels, 0.25, false),
+            (&labels, 0.25, true),
+            (&labels, 0.15, true),
+            (&labels, 0.2, false),
+        ];
+        for (labs, t, kept) in steps {
             reused.relabel(labs, pc(t));
+            assert_eq!(reused.evaluated_at(&pose), kept, "{t}");
             let mut fresh = PointObjective::new(&model, &pts, labs, pc(t));
+            if kept {
+                // The kept evaluation's cost, before any new evaluation.
+                assert_eq!(reused.cost(&pose), fresh.cost(&pose));
+            }
             assert_eq!(system(&mut reused), system(&mut fresh));
+        }
+    }
+
+    /// `kept_distances` gives each labelled point's distance to its segment at the
+    /// kept evaluation's pose (the batched query's value, or infinite only where that
+    /// passes the truncation), leaves the other points alone, and gives nothing for
+    /// another pose or other labels.
+    #[test]
+    fn kept_distances_are_the_evaluations() {
+        let model = BodyModel::default();
+        let pose = pose_for_tests(5);
+        let (pts, labels) = scattered(&model, &pose, 2000);
+        let pc = PointCost {
+            sigma: 0.02,
+            loss: Loss::Squared,
+            truncation: 0.1,
+        };
+        let mut obj = PointObjective::new(&model, &pts, &labels, pc);
+        let mut out = vec![f64::NAN; pts.len()];
+        assert!(!obj.kept_distances(&pose, &labels, &mut out));
+        obj.cost(&pose);
+        let mut other_pose = pose;
+        other_pose[7] += 1e-9;
+        let mut other_labels = labels.clone();
+        other_labels[3] = (other_labels[3] + 1) % 14;
+        assert!(!obj.kept_distances(&other_pose, &labels, &mut out));
+        assert!(!obj.kept_distances(&pose, &other_labels, &mut out));
+        assert!(!obj.kept_distances(&pose, &labels, &mut out[1..]));
+        assert!(out.iter().all(|d| d.is_nan()));
+        assert!(obj.kept_distances(&pose, &labels, &mut out));
+        let geo = PoseGeometry::new(&model, &pose);
+        let (mut infinite, mut exact) = (0, 0);
+        for (i, (p, &l)) in pts.iter().zip(&labels).enumerate() {
+            if !(0..NUM_SEGMENTS as i32).contains(&l) {
+                assert!(out[i].is_nan(), "point {i} (label {l}) was written");
+                continue;
+            }
+            let e = &geo.segments[l as usize];
+            let mut d = f64::NAN;
+            e.signed_distances_batched(std::iter::once((0, e.local(&vec3(p)))), |_, v| d = v);
+            if out[i].is_infinite() {
+                assert!(d.abs() >= pc.truncation, "point {i}: {d} given as infinite");
+                infinite += 1;
+            } else {
+                assert_eq!(out[i], d, "point {i}");
+                exact += 1;
+            }
+        }
+        assert!(
+            infinite > 100 && exact > 100,
+            "{infinite} infinite, {exact} exact"
+        );
+    }
+
+    /// ρ's inverse on r ≥ 0 for every loss, and the largest residual within a cost:
+    /// its cost is the given one (below the cap), infinite at and above the cap.
+    #[test]
+    fn rho_inverse_and_residual_within() {
+        for loss in [Loss::Squared, Loss::Huber(0.03), Loss::Cauchy(0.05)] {
+            for k in 0..200 {
+                let r = 0.002 * k as f64;
+                let back = loss.rho_inverse(loss.rho(r));
+                assert!(
+                    (back - r).abs() <= 1e-12 * (1.0 + r),
+                    "{loss:?}: {r} -> {back}"
+                );
+            }
+            let pc = PointCost {
+                sigma: 0.02,
+                loss,
+                truncation: 0.2,
+            };
+            for k in 0..100 {
+                let c = pc.cap() * k as f64 / 100.0;
+                let r = pc.residual_within(c);
+                assert!(r < pc.truncation);
+                assert!((pc.cost(r) - c).abs() <= 1e-12 * (1.0 + c), "{loss:?}: {c}");
+            }
+            assert_eq!(pc.residual_within(pc.cap()), f64::INFINITY);
+            assert_eq!(pc.residual_within(f64::INFINITY), f64::INFINITY);
         }
     }
 
