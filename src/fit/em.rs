@@ -847,7 +847,7 @@ impl<'g> EStep<'g> {
             .map(|(labels, _)| labels)
     }
 
-    /// [`Self::expand`] with `beside` run beside its cycles after the first (see
+    /// [`Self::expand`] with `beside` run beside its cycles (see
     /// [`CrfSolver::alpha_expansion_beside`]): its output for the labels returned, if
     /// it ran for them.
     fn expand_beside<R: Send>(

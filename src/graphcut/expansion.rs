@@ -718,10 +718,11 @@ impl<C: Cost> CrfSolver<C> {
     }
 
     /// [`Self::alpha_expansion`] with `beside` run on another worker of rayon's pool
-    /// beside every cycle after the first, for the labelling that cycle starts from.
-    /// The expansion ends with a cycle that accepts no move, so the labelling that
-    /// cycle starts from is usually the result: `beside` can start the work that
-    /// needs the result before the last cycle has confirmed it. Returns `beside`'s
+    /// beside every cycle, for the labelling that cycle starts from. The expansion
+    /// ends with a cycle that accepts no move, so the labelling that cycle starts from
+    /// is usually the result: `beside` can start the work that needs the result
+    /// before the last cycle has confirmed it (beside the first cycle, for the case
+    /// that the starting labelling is already the result). Returns `beside`'s
     /// output for the cycle that ended the solve when it accepted no move (its
     /// labelling is then exactly the result's), else `None`. The flag passed to
     /// `beside` is raised as soon as its cycle accepts a move: its output will be
@@ -792,7 +793,7 @@ impl<C: Cost> CrfSolver<C> {
         while cycles < config.max_cycles {
             cycles += 1;
             let improved = match beside.as_deref_mut() {
-                Some(work) if cycles > 1 => {
+                Some(work) => {
                     seen.clone_from(&run.labels);
                     let accepted = AtomicBool::new(false);
                     let (improved, output) = rayon::join(
@@ -804,7 +805,7 @@ impl<C: Cost> CrfSolver<C> {
                     }
                     improved
                 }
-                _ => self.expansion_cycle(&c, &mut run, None),
+                None => self.expansion_cycle(&c, &mut run, None),
             };
             if !improved {
                 break;
@@ -1745,8 +1746,8 @@ mod tests {
 
     proptest! {
         /// The work beside the cycles changes nothing in the expansion, runs beside
-        /// every cycle after the first, and its output is returned exactly when its
-        /// cycle accepted no move, having seen the labelling returned.
+        /// every cycle, and its output is returned exactly when its cycle accepted no
+        /// move, having seen the labelling returned.
         #[test]
         fn work_beside_the_last_cycle_sees_the_result(
             w in 2usize..9,
@@ -1771,11 +1772,18 @@ mod tests {
                 })
                 .unwrap();
             prop_assert_eq!(&with, &plain);
-            prop_assert_eq!(seen.len(), plain.cycles - 1);
-            // Whether the last cycle accepted no move: one cycle fewer ends elsewhere.
-            let fewer = MoveConfig { max_cycles: plain.cycles - 1 };
-            let last_cycle_idle = plain.cycles > 1
-                && s.alpha_expansion(&v, Some(&init), &fewer).unwrap().labels == plain.labels;
+            prop_assert_eq!(seen.len(), plain.cycles);
+            prop_assert_eq!(&seen[0], &init);
+            // Whether the last cycle accepted no move: one cycle fewer (none: the
+            // starting labels) ends elsewhere.
+            let before_last = match plain.cycles - 1 {
+                0 => init.clone(),
+                fewer => {
+                    let fewer = MoveConfig { max_cycles: fewer };
+                    s.alpha_expansion(&v, Some(&init), &fewer).unwrap().labels
+                }
+            };
+            let last_cycle_idle = before_last == plain.labels;
             prop_assert_eq!(output.is_some(), last_cycle_idle);
             if let Some(labels) = output {
                 prop_assert_eq!(&labels, &plain.labels);
