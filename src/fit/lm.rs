@@ -295,8 +295,8 @@ impl LevenbergMarquardt {
     }
 
     /// [`Self::minimize`], abandoned (`None`, `pose` then part-way) once `abandon` is
-    /// raised: checked before each new normal system, so another thread can stop a
-    /// minimisation whose result it knows will not be used.
+    /// raised: checked before each new normal system (the first included), so another
+    /// thread can stop a minimisation whose result it knows will not be used.
     pub fn minimize_unless<O: PoseObjective>(
         &mut self,
         objective: &mut O,
@@ -305,6 +305,9 @@ impl LevenbergMarquardt {
     ) -> Option<LmReport> {
         let cfg = self.config;
         *pose = BodyModel::clamp_pose(pose);
+        if abandon.load(AtomicOrdering::Relaxed) {
+            return None;
+        }
         let mut lambda = cfg.initial_damping;
         let mut cost = objective.normal_equations(pose, &mut self.h, &mut self.g);
         let initial_cost = cost;
@@ -613,6 +616,14 @@ mod tests {
             let (report, _, built) = run(at);
             assert_eq!((report, built), (None, at));
         }
+        // Raised before the start: no system at all.
+        let raised = AtomicBool::new(true);
+        let mut bowl = Bowl::new();
+        let mut pose = BodyModel::neutral_pose();
+        let mut lm = LevenbergMarquardt::new(tight).unwrap();
+        assert_eq!(lm.minimize_unless(&mut bowl, &mut pose, &raised), None);
+        assert_eq!(pose, BodyModel::neutral_pose());
+        assert_eq!(bowl.evaluations, 0);
     }
 
     #[test]
