@@ -1333,6 +1333,22 @@ mod tests {
         (cloud, graph)
     }
 
+    /// The neutral pose 2.3 m in front of the ITOP camera with one joint angle set (the
+    /// truth), and the cloud and graph of its rendered depth.
+    fn bent_frame(
+        model: &BodyModel,
+        joint: usize,
+        angle: f64,
+    ) -> (Pose, crate::cloud::Cloud, PixelGraph) {
+        let cam = crate::Camera::itop();
+        let mut truth = BodyModel::neutral_pose();
+        truth[2] = 2.3;
+        truth[joint] = angle;
+        let (depth, _) = model.render_depth(&truth, &cam);
+        let (cloud, graph) = cloud_and_graph(&depth, &cam);
+        (truth, cloud, graph)
+    }
+
     /// Running late M-steps beside the E-step before them changes nothing: the same
     /// pose, labels, energies and iterations as one step after the other, with and
     /// without the free-space term and from several starts; and it does happen.
@@ -1485,12 +1501,7 @@ mod tests {
     #[test]
     fn e_step_candidate_sets_are_the_solvers() {
         let model = BodyModel::default();
-        let cam = crate::Camera::itop();
-        let mut truth = BodyModel::neutral_pose();
-        truth[2] = 2.3;
-        truth[crate::body::param::R_ELBOW] = 0.9;
-        let (depth, _) = model.render_depth(&truth, &cam);
-        let (cloud, graph) = cloud_and_graph(&depth, &cam);
+        let (truth, cloud, graph) = bent_frame(&model, crate::body::param::R_ELBOW, 0.9);
         let (points, n) = (&cloud.points, cloud.len());
         assert_ne!(
             n % 64,
@@ -1549,12 +1560,7 @@ mod tests {
     #[test]
     fn own_distances_from_the_m_step_give_the_same_terms() {
         let model = BodyModel::default();
-        let cam = crate::Camera::itop();
-        let mut truth = BodyModel::neutral_pose();
-        truth[2] = 2.3;
-        truth[crate::body::param::L_KNEE] = 0.7;
-        let (depth, _) = model.render_depth(&truth, &cam);
-        let (cloud, graph) = cloud_and_graph(&depth, &cam);
+        let (truth, cloud, graph) = bent_frame(&model, crate::body::param::L_KNEE, 0.7);
         let (points, n) = (&cloud.points, cloud.len());
         let config = EmConfig::default();
         let tau = config.outlier_distance_at(0);
