@@ -721,7 +721,11 @@ impl SortedPlacement {
     pub fn lower_bound_passes(&self, y: &[f64; 3], t: f64) -> bool {
         let s = 1.0 + t * self.sorted.inv_e[2];
         let r = self.sorted.e[0] + t;
-        self.level(y) >= s * s || y[0] * y[0] + y[1] * y[1] + y[2] * y[2] >= r * r
+        let b = Beyond {
+            level: s * s,
+            norm2: r * r,
+        };
+        self.is_beyond(&b, y)
     }
 
     /// [`Self::local`] and [`Self::is_beyond`] of many camera-frame points at once, the

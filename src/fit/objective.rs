@@ -229,9 +229,7 @@ impl<'a> PointObjective<'a> {
                     self.distance
                         .par_chunks(CHUNK_POINTS)
                         .zip(self.partial_costs.par_iter_mut())
-                        .for_each(|(dist, cost)| {
-                            *cost = dist.iter().map(|&d| point_cost.cost(d)).sum()
-                        });
+                        .for_each(|(dist, cost)| *cost = chunk_cost(dist, &point_cost));
                 }
                 self.point_cost = point_cost;
             }
@@ -305,7 +303,7 @@ impl<'a> PointObjective<'a> {
                         normal[r] = n;
                     });
                 }
-                *cost = dist.iter().map(|&d| pc.cost(d)).sum();
+                *cost = chunk_cost(dist, &pc);
             });
         self.evaluated = Some(*pose);
     }
@@ -313,6 +311,12 @@ impl<'a> PointObjective<'a> {
     fn total_cost(&self) -> f64 {
         self.partial_costs.iter().sum()
     }
+}
+
+/// Σ cost over one chunk's distances, in order (the kept chunk costs; `relabel`
+/// recomputes them the same way for a new `PointCost`).
+fn chunk_cost(dist: &[f64], pc: &PointCost) -> f64 {
+    dist.iter().map(|&d| pc.cost(d)).sum()
 }
 
 /// The runs of equal segment in `seg` (a chunk of a segment-sorted order): (segment,
