@@ -30,7 +30,9 @@ use crate::body::residuals::{to_f64, PoseGeometry};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::cloud::PixelGraph;
 use crate::error::{ensure, Error, Result};
-use crate::graphcut::expansion::{potts_candidate_mask, NO_WORK_BESIDE};
+use crate::graphcut::expansion::{
+    potts_candidate_mask, potts_energy, ExpansionHints, NO_WORK_BESIDE,
+};
 use crate::graphcut::{CrfProblem, CrfSolver, MoveConfig};
 use rayon::prelude::*;
 use std::sync::atomic::AtomicBool;
@@ -562,20 +564,32 @@ fn unary_chunk(
         });
         e.signed_distances_batched(items, |i, d| u[i * NUM_LABELS + k] = pc.cost(d));
     }
-    // The expansion's candidate sets from the finished rows: bit i % 64 of word
-    // (i / 64, a) where point i may switch to label a.
     if let (Some(words), Some((labels, slack))) = (candidate_words, labels_and_slack) {
-        words.fill(0);
-        for (i, (&l, &w)) in labels.iter().zip(slack).enumerate() {
-            let row = &u[i * NUM_LABELS..(i + 1) * NUM_LABELS];
-            let mut mask = potts_candidate_mask(row, l.clamp(0, OUTLIER) as usize, w);
-            let block = &mut words[i / 64 * NUM_LABELS..(i / 64 + 1) * NUM_LABELS];
-            while mask != 0 {
-                block[mask.trailing_zeros() as usize] |= 1 << (i % 64);
-                mask &= mask - 1;
-            }
+        fill_candidate_words(u, labels, slack, words);
+    }
+}
+
+/// The expansion's candidate sets for one chunk of points from their finished rows `u`,
+/// labels and slacks: bit i % 64 of word (i / 64, a) where point i may switch to label
+/// a.
+fn fill_candidate_words(u: &[f64], labels: &[i32], slack: &[f64], words: &mut [u64]) {
+    words.fill(0);
+    for (i, (&l, &w)) in labels.iter().zip(slack).enumerate() {
+        let row = &u[i * NUM_LABELS..(i + 1) * NUM_LABELS];
+        let mut mask = potts_candidate_mask(row, l.clamp(0, OUTLIER) as usize, w);
+        let block = &mut words[i / 64 * NUM_LABELS..(i / 64 + 1) * NUM_LABELS];
+        while mask != 0 {
+            block[mask.trailing_zeros() as usize] |= 1 << (i % 64);
+            mask &= mask - 1;
         }
     }
+}
+
+/// The label of least cost in a unary row (the first of equals).
+fn cheapest_label(row: &[f64]) -> i32 {
+    (0..row.len())
+        .min_by(|&a, &b| row[a].total_cmp(&row[b]))
+        .unwrap_or(0) as i32
 }
 
 /// After an E-step on terms from [`unary_costs_for_labels`]: the exact cost of every
@@ -625,18 +639,9 @@ fn problem<'a>(unary: &'a [f64], edges: &'a [[u32; 2]], weights: &'a [f64]) -> C
 
 /// E(V) for fixed unary terms and edge weights.
 pub fn crf_energy(unary: &[f64], edges: &[[u32; 2]], weights: &[f64], labels: &[i32]) -> f64 {
-    let u: f64 = labels
-        .iter()
-        .enumerate()
-        .map(|(i, &l)| unary[i * NUM_LABELS + l as usize])
-        .sum();
-    let p: f64 = edges
-        .iter()
-        .zip(weights)
-        .filter(|(e, _)| labels[e[0] as usize] != labels[e[1] as usize])
-        .map(|(_, w)| w)
-        .sum();
-    u + p
+    // The expansion solver's own sum (same order, same bits), so that the EM can take
+    // an E-step's energy from the solver.
+    potts_energy(unary, NUM_LABELS, edges, weights, labels)
 }
 
 /// Labels as reported to callers, with what they contain.
@@ -675,6 +680,13 @@ impl PointLabels {
     }
 }
 
+/// An E-step's labels and their CRF energy ([`EStep::energy`], at the terms that
+/// E-step left).
+struct Expanded {
+    labels: Vec<i32>,
+    energy: f64,
+}
+
 /// The E-step's CRF over one point set, its buffers reused across a fit's E-steps: the
 /// edge weights, the unary terms at the current pose and τ, and the expansion solver.
 struct EStep<'g> {
@@ -696,6 +708,9 @@ struct EStep<'g> {
     candidate_words: Vec<u64>,
     candidates_for: Vec<i32>,
     candidates_valid: bool,
+    /// `solver` has run an expansion on `graph`'s edges and `weights` (which stay as
+    /// they are for the E-step's life): later ones need not check them again.
+    structure_checked: bool,
 }
 
 impl<'g> EStep<'g> {
@@ -764,6 +779,7 @@ impl<'g> EStep<'g> {
             candidate_words: vec![0; n.div_ceil(64) * NUM_LABELS],
             candidates_for: Vec::with_capacity(n),
             candidates_valid: false,
+            structure_checked: false,
         }
     }
 
@@ -822,29 +838,43 @@ impl<'g> EStep<'g> {
         crf_energy(&self.unary, &self.graph.edges, &self.weights, labels)
     }
 
-    /// The cheapest label of each point, ignoring the pairwise terms.
-    fn cheapest_labels(&self) -> Vec<i32> {
+    /// The cheapest label of each point, ignoring the pairwise terms; also the
+    /// expansion's candidate sets for these labels (both in parallel: the initial
+    /// expansion need not collect its sets on one thread).
+    fn cheapest_labels(&mut self) -> Vec<i32> {
+        let mut cheapest = vec![0; self.slack.len()];
         self.unary
-            .chunks_exact(NUM_LABELS)
-            .map(|row| {
-                (0..NUM_LABELS)
-                    .min_by(|&a, &b| row[a].total_cmp(&row[b]))
-                    .unwrap_or(0) as i32
-            })
-            .collect()
+            .par_chunks(CHUNK_POINTS * NUM_LABELS)
+            .zip(cheapest.par_chunks_mut(CHUNK_POINTS))
+            .zip(self.slack.par_chunks(CHUNK_POINTS))
+            .zip(
+                self.candidate_words
+                    .par_chunks_mut(CANDIDATE_WORDS_PER_CHUNK),
+            )
+            .for_each(|(((u, labels), slack), words)| {
+                for (row, l) in u.chunks_exact(NUM_LABELS).zip(labels.iter_mut()) {
+                    *l = cheapest_label(row);
+                }
+                fill_candidate_words(u, labels, slack, words);
+            });
+        self.candidates_for.clone_from(&cheapest);
+        self.candidates_valid = true;
+        cheapest
     }
 
-    /// Alpha-expansion from `init`; the terms of the labels it ends with are exact
-    /// (see [`settle_unary`]).
+    /// Alpha-expansion from `init`, whose energy [`Self::energy`] may give as
+    /// `init_energy` (at the current terms); the terms of the labels it ends with are
+    /// exact (see [`settle_unary`]).
     fn expand(
         &mut self,
         model: &BodyModel,
         points: &[[f32; 3]],
         config: &EmConfig,
         init: &[i32],
-    ) -> Result<Vec<i32>> {
-        self.expand_with(model, points, config, init, NO_WORK_BESIDE)
-            .map(|(labels, _)| labels)
+        init_energy: Option<f64>,
+    ) -> Result<Expanded> {
+        self.expand_with(model, points, config, init, init_energy, NO_WORK_BESIDE)
+            .map(|(expanded, _)| expanded)
     }
 
     /// [`Self::expand`] with `beside` run beside its cycles (see
@@ -856,9 +886,10 @@ impl<'g> EStep<'g> {
         points: &[[f32; 3]],
         config: &EmConfig,
         init: &[i32],
+        init_energy: Option<f64>,
         beside: &mut (impl FnMut(&[i32], &AtomicBool) -> R + Send),
-    ) -> Result<(Vec<i32>, Option<R>)> {
-        self.expand_with(model, points, config, init, Some(beside))
+    ) -> Result<(Expanded, Option<R>)> {
+        self.expand_with(model, points, config, init, init_energy, Some(beside))
     }
 
     fn expand_with<R: Send>(
@@ -867,27 +898,39 @@ impl<'g> EStep<'g> {
         points: &[[f32; 3]],
         config: &EmConfig,
         init: &[i32],
+        init_energy: Option<f64>,
         beside: Option<&mut (impl FnMut(&[i32], &AtomicBool) -> R + Send)>,
-    ) -> Result<(Vec<i32>, Option<R>)> {
+    ) -> Result<(Expanded, Option<R>)> {
         let p = problem(&self.unary, &self.graph.edges, &self.weights);
-        // The candidate sets, if computed for `init` (see `set_pose`).
-        let candidates = (self.candidates_valid && self.candidates_for == init)
-            .then_some(&self.candidate_words[..]);
+        let hints = ExpansionHints {
+            // The candidate sets, if computed for `init` (see `set_pose`).
+            candidates: (self.candidates_valid && self.candidates_for == init)
+                .then_some(&self.candidate_words[..]),
+            init_energy,
+            same_structure: self.structure_checked,
+        };
         let (labelling, output) =
             self.solver
-                .expansion_with(&p, Some(init), &self.moves, candidates, beside)?;
-        self.settle(model, points, config, &labelling.labels);
-        Ok((labelling.labels, output))
+                .expansion_with(&p, Some(init), &self.moves, hints, beside)?;
+        self.structure_checked = true;
+        // The solver's energy is `Self::energy`'s sum; settled terms change it.
+        let energy = match self.settle(model, points, config, &labelling.labels) {
+            0 => labelling.energy,
+            _ => self.energy(&labelling.labels),
+        };
+        debug_assert_eq!(energy, self.energy(&labelling.labels));
+        let labels = labelling.labels;
+        Ok((Expanded { labels, energy }, output))
     }
 
-    /// Makes the terms of `labels` exact (see [`settle_unary`]).
+    /// Makes the terms of `labels` exact (see [`settle_unary`]); how many changed.
     fn settle(
         &mut self,
         model: &BodyModel,
         points: &[[f32; 3]],
         config: &EmConfig,
         labels: &[i32],
-    ) {
+    ) -> usize {
         self.candidates_valid = false;
         settle_unary(
             model,
@@ -898,7 +941,7 @@ impl<'g> EStep<'g> {
             labels,
             &mut self.unary,
             &mut self.skipped,
-        );
+        )
     }
 }
 
@@ -924,8 +967,7 @@ pub fn label_points(
         ));
     }
     let mut crf = EStep::at_pose(graph, model, points, pose, config, tau, Some(init))?;
-    let labels = crf.expand(model, points, config, init)?;
-    let energy = crf.energy(&labels);
+    let Expanded { labels, energy } = crf.expand(model, points, config, init, None)?;
     Ok((PointLabels::new(labels), energy))
 }
 
@@ -1145,8 +1187,9 @@ fn run_hard_em(
     // (Relabelled before each M-step.)
     let mut objective =
         PointObjective::new(model, points, &vec![OUTLIER; n], config.point_cost(tau));
-    let mut labels: Vec<i32> = match resumed_labels {
-        Some(labels) => labels.to_vec(),
+    // The CRF energy of `labels` at the current terms, where known.
+    let (mut labels, mut labels_energy): (Vec<i32>, Option<f64>) = match resumed_labels {
+        Some(labels) => (labels.to_vec(), None),
         None => {
             // Initial labels: the cheapest label of each point, then the CRF.
             let cheapest = crf.cheapest_labels();
@@ -1159,19 +1202,20 @@ fn run_hard_em(
                     (pose, config.point_cost(tau)),
                     &mut ahead.run,
                 );
-                let (labels, m_step) =
-                    crf.expand_beside(model, points, config, &cheapest, &mut beside)?;
+                let (expanded, m_step) =
+                    crf.expand_beside(model, points, config, &cheapest, None, &mut beside)?;
                 // The first M-step's labels are these.
                 next_m_step = m_step.flatten();
                 ahead.used += usize::from(next_m_step.is_some());
                 ahead.used_beside_last_cycle += usize::from(next_m_step.is_some());
-                labels
+                (expanded.labels, Some(expanded.energy))
             } else {
-                crf.expand(model, points, config, &cheapest)?
+                let expanded = crf.expand(model, points, config, &cheapest, None)?;
+                (expanded.labels, Some(expanded.energy))
             }
         }
     };
-    let mut energy = crf.energy(&labels) + pose_cost(&pose);
+    let mut energy = labels_energy.unwrap_or_else(|| crf.energy(&labels)) + pose_cost(&pose);
     let mut trace = vec![energy];
     let mut own_distance = vec![0.0; n];
     let mut termination = EmTermination::MaxIterations;
@@ -1208,21 +1252,26 @@ fn run_hard_em(
                 Some(&labels),
                 own,
             );
-            let e = crf.energy(&labels) + pose_cost(&new_pose);
+            let crf_energy = crf.energy(&labels);
+            let e = crf_energy + pose_cost(&new_pose);
             if e <= energy {
                 pose = new_pose;
                 energy = e;
                 tau = next_tau;
+                labels_energy = Some(crf_energy);
             } else {
                 // Cannot happen in exact arithmetic; keep the better state.
                 crf.set_pose(model, points, &pose, config, tau, Some(&labels), None);
+                labels_energy = None;
             }
             trace.push(energy);
         }
         if next_tau != tau {
             tau = next_tau;
             crf.set_pose(model, points, &pose, config, tau, Some(&labels), None);
-            energy = crf.energy(&labels) + pose_cost(&pose);
+            let crf_energy = crf.energy(&labels);
+            energy = crf_energy + pose_cost(&pose);
+            labels_energy = Some(crf_energy);
         }
         // E-step. The expansion runs on one core; the next M-step runs beside it on
         // the other, for labels the E-step is likely to end with, with the next
@@ -1234,17 +1283,17 @@ fn run_hard_em(
         // the labels that cycle starts from (see `CrfSolver::alpha_expansion_beside`).
         let may_run_ahead = m_steps_ahead && iterations < config.max_iterations;
         let point_cost = config.point_cost(tau);
-        let (new_labels, m_step_ahead) = if may_run_ahead && last_changed == Some(0) {
+        let (expanded, m_step_ahead) = if may_run_ahead && last_changed == Some(0) {
             ahead.run += 1;
-            let (new_labels, m_step_done) = rayon::join(
-                || crf.expand(model, points, config, &labels),
+            let (expanded, m_step_done) = rayon::join(
+                || crf.expand(model, points, config, &labels, labels_energy),
                 || {
                     objective.relabel(&labels, point_cost);
                     let free_space = free_space_ahead.as_mut().map(|f| &*f);
                     m_step(&mut lm, &mut objective, prior, free_space, &pose)
                 },
             );
-            (new_labels?, Some(RunAhead::ForOldLabels(m_step_done)))
+            (expanded?, Some(RunAhead::ForOldLabels(m_step_done)))
         } else if may_run_ahead {
             let mut beside = m_step_beside(
                 &mut lm,
@@ -1254,25 +1303,31 @@ fn run_hard_em(
                 (pose, point_cost),
                 &mut ahead.run,
             );
-            let (new_labels, m_step_done) =
-                crf.expand_beside(model, points, config, &labels, &mut beside)?;
-            (
-                new_labels,
-                m_step_done.flatten().map(RunAhead::ForNewLabels),
-            )
+            let (expanded, m_step_done) =
+                crf.expand_beside(model, points, config, &labels, labels_energy, &mut beside)?;
+            (expanded, m_step_done.flatten().map(RunAhead::ForNewLabels))
         } else {
-            (crf.expand(model, points, config, &labels)?, None)
+            (
+                crf.expand(model, points, config, &labels, labels_energy)?,
+                None,
+            )
         };
+        let new_labels = expanded.labels;
         let changed = new_labels
             .iter()
             .zip(&labels)
             .filter(|(a, b)| a != b)
             .count();
-        let e = crf.energy(&new_labels) + pose_cost(&pose);
+        let e = expanded.energy + pose_cost(&pose);
         let accept = e <= energy;
         if accept {
             labels = new_labels;
             energy = e;
+            labels_energy = Some(expanded.energy);
+        } else {
+            // (Only a rounding tie could get here.) The old labels stay; their energy
+            // is summed afresh if needed.
+            labels_energy = None;
         }
         // Whether the M-step run ahead had the labels the next M-step starts from.
         next_m_step = match m_step_ahead {
@@ -1495,9 +1550,9 @@ mod tests {
         }
     }
 
-    /// The candidate sets the E-step computes in its unary pass are those the
-    /// solver collects itself, and the expansion from them ends where the solver's own
-    /// does.
+    /// The candidate sets the E-step computes in its unary pass (and with the cheapest
+    /// labels) are those the solver collects itself, and the expansion from them ends
+    /// where the solver's own does.
     #[test]
     fn e_step_candidate_sets_are_the_solvers() {
         let model = BodyModel::default();
@@ -1515,7 +1570,23 @@ mod tests {
         crf.set_pose(&model, points, &start, &config, tau, None, None);
         assert!(!crf.candidates_valid);
         let cheapest = crf.cheapest_labels();
-        let labels = crf.expand(&model, points, &config, &cheapest).unwrap();
+        // The cheapest labels (first of equals) and, for them, the sets the solver
+        // would collect.
+        for (i, &l) in cheapest.iter().enumerate() {
+            let row = &crf.unary[i * NUM_LABELS..(i + 1) * NUM_LABELS];
+            assert!(row.iter().all(|&u| u >= row[l as usize]));
+            assert!(row[..l as usize].iter().all(|&u| u > row[l as usize]));
+        }
+        assert!(crf.candidates_valid);
+        let p = problem(&crf.unary, &graph.edges, &crf.weights);
+        let want = CrfSolver::new(n, &graph.edges)
+            .unwrap()
+            .collected_candidate_words(&p, &cheapest);
+        assert_eq!(crf.candidate_words, want);
+        let labels = crf
+            .expand(&model, points, &config, &cheapest, None)
+            .unwrap()
+            .labels;
         // Also labels off the E-step's result: every 7th point moved to another label.
         let mixed: Vec<i32> = labels
             .iter()
@@ -1545,7 +1616,13 @@ mod tests {
                 .alpha_expansion(&p, Some(held), &moves)
                 .unwrap()
                 .labels;
-            assert_eq!(crf.expand(&model, points, &config, held).unwrap(), own);
+            // With the start's energy handed over, as the EM does.
+            let held_energy = crf.energy(held);
+            let expanded = crf
+                .expand(&model, points, &config, held, Some(held_energy))
+                .unwrap();
+            assert_eq!(expanded.labels, own);
+            assert_eq!(expanded.energy, crf.energy(&own));
             assert!(
                 !crf.candidates_valid,
                 "the settled terms are not the sets' terms"
@@ -1567,7 +1644,10 @@ mod tests {
         let start = crate::fit::tests::perturbed(&truth, 5, 0.3, 0.08);
         let mut crf = EStep::at_pose(&graph, &model, points, &start, &config, tau, None).unwrap();
         let cheapest = crf.cheapest_labels();
-        let labels = crf.expand(&model, points, &config, &cheapest).unwrap();
+        let labels = crf
+            .expand(&model, points, &config, &cheapest, None)
+            .unwrap()
+            .labels;
         // Every 9th point at a segment far from it, for distances beyond the truncation.
         let labels: Vec<i32> = (labels.iter().enumerate())
             .map(|(i, &l)| match i % 9 {

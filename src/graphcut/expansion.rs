@@ -40,10 +40,30 @@ pub trait Cost: Capacity {
     fn mul(self, other: Self) -> Option<Self> {
         self.checked_mul(other)
     }
+    /// Whether every value is finite and not [`Self::FORBIDDEN`].
+    fn all_plain(values: &[Self]) -> bool {
+        values.iter().fold(true, |ok, &u| {
+            ok & u.is_finite_value() & (u != Self::FORBIDDEN)
+        })
+    }
 }
 
 impl Cost for f64 {
     const FORBIDDEN: Self = f64::INFINITY;
+    fn all_plain(values: &[f64]) -> bool {
+        // x · 0 is ±0 for a finite x and NaN for ±inf or NaN (so for the forbidden
+        // +inf too). Sums in eight lanes vectorise, where the fold of comparisons ran
+        // one value at a time (most of an E-step's checks).
+        let mut lanes = [0.0f64; 8];
+        let mut chunks = values.chunks_exact(8);
+        for c in &mut chunks {
+            for (lane, &x) in lanes.iter_mut().zip(c) {
+                *lane += x * 0.0;
+            }
+        }
+        let rest = chunks.remainder().iter().fold(0.0, |s, &x| s + x * 0.0);
+        lanes.iter().sum::<f64>() + rest == 0.0
+    }
 }
 
 impl Cost for i64 {
@@ -133,11 +153,13 @@ struct Checked<'a, C: Cost> {
     allowed_somewhere: Vec<bool>,
 }
 
-/// Checks `p` (`edges_checked`: its edges are known to be in range for its nodes).
+/// Checks `p` (`edges_checked`: its edges are known to be in range for its nodes;
+/// `weights_checked`: its weights are known to be finite and non-negative).
 fn check_problem<'a, C: Cost>(
     p: &CrfProblem<'a, C>,
     need_metric: bool,
     edges_checked: bool,
+    weights_checked: bool,
 ) -> Result<Checked<'a, C>> {
     let l = p.n_labels;
     ensure(l >= 1, "unary", || "needs at least one label".into())?;
@@ -158,9 +180,7 @@ fn check_problem<'a, C: Cost>(
     })?;
     // One branch-free (vectorised) pass settles the common case: every cost finite and
     // none forbidden. Only otherwise are the costs searched for the bad or forbidden.
-    let plain = p.unary.iter().fold(true, |ok, &u| {
-        ok & u.is_finite_value() & (u != C::FORBIDDEN)
-    });
+    let plain = C::all_plain(p.unary);
     if let Some(k) = (!plain)
         .then(|| {
             p.unary
@@ -202,10 +222,10 @@ fn check_problem<'a, C: Cost>(
             ),
         ));
     }
-    let weights_ok = p
-        .weights
-        .iter()
-        .fold(true, |ok, &w| ok & w.is_finite_value() & (w >= C::ZERO));
+    let weights_ok = weights_checked
+        || p.weights
+            .iter()
+            .fold(true, |ok, &w| ok & w.is_finite_value() & (w >= C::ZERO));
     if let Some(k) = (!weights_ok)
         .then(|| {
             p.weights
@@ -507,7 +527,7 @@ impl<C: Cost> Checked<'_, C> {
 /// The energy of `labels` (with `unary` N×L etc. as in [`CrfProblem`]).
 /// Returns [`Cost::FORBIDDEN`] if a node has a forbidden label.
 pub fn energy<C: Cost>(problem: &CrfProblem<C>, labels: &[i32]) -> Result<C> {
-    let c = check_problem(problem, false, false)?;
+    let c = check_problem(problem, false, false, false)?;
     ensure(labels.len() == c.n, "labels", || {
         format!("length {} does not match {} nodes", labels.len(), c.n)
     })?;
@@ -518,6 +538,33 @@ pub fn energy<C: Cost>(problem: &CrfProblem<C>, labels: &[i32]) -> Result<C> {
         ));
     }
     Ok(c.energy(labels).value())
+}
+
+/// The energy of `labels` under Potts costs (`pairwise` None), unchecked: the sum
+/// [`CrfSolver`] computes (same order, so the same bits), which lets a caller that
+/// tracks energies hand one to [`ExpansionHints::init_energy`] or compare it with a
+/// [`Labelling`]'s. Sizes and labels must be in range (panics otherwise); a forbidden
+/// label gives [`Cost::FORBIDDEN`].
+pub(crate) fn potts_energy<C: Cost>(
+    unary: &[C],
+    n_labels: usize,
+    edges: &[[u32; 2]],
+    weights: &[C],
+    labels: &[i32],
+) -> C {
+    let c = Checked {
+        n: labels.len(),
+        l: n_labels,
+        unary,
+        edges,
+        weights,
+        // Potts: `pair` reads neither; `energy` needs neither.
+        v: Vec::new(),
+        potts: true,
+        big: C::ZERO,
+        allowed_somewhere: Vec::new(),
+    };
+    c.energy(labels).value()
 }
 
 /// Alpha-expansion (metric `pairwise`), one shot. See [`CrfSolver`] to reuse storage.
@@ -564,6 +611,39 @@ struct ExpansionRun<C: Cost> {
     /// Per label: the version at which its move last failed.
     failed_at: Vec<usize>,
     tried: usize,
+}
+
+/// What a caller inside the crate may know about an expansion's problem and so spare
+/// the solver from working out again (see [`CrfSolver::expansion_with`]). Wrong hints
+/// give a wrong labelling; each is checked in debug builds.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ExpansionHints<'a, C> {
+    /// The per-label candidate sets the expansion starts from, computed by the caller
+    /// (in parallel, where it computes the unary terms): for each block of 64 nodes
+    /// `w` and label `a`, `candidates[w * l + a]` has bit `b` set where node `64w +
+    /// b`'s [`potts_candidate_mask`] (of its unary row, its `init` label and its sum of
+    /// edge weights in edge order) has bit `a` set. Used when the problem takes that
+    /// form (Potts, nothing forbidden, at most 64 labels, pruning on, finite weight
+    /// sums), else the sets are collected by the solver.
+    pub candidates: Option<&'a [u64]>,
+    /// E(init), as [`potts_energy`] gives it for this problem (bit for bit); used when
+    /// nothing is forbidden.
+    pub init_energy: Option<C>,
+    /// The problem's edges and weights are, value for value, those of this solver's
+    /// last expansion that returned `Ok` (an E-step's neighbourhood graph and weights
+    /// stay the same across its frame's EM iterations): their checks, the edge
+    /// comparison and the weight sums are not redone.
+    pub same_structure: bool,
+}
+
+impl<C> Default for ExpansionHints<'_, C> {
+    fn default() -> Self {
+        ExpansionHints {
+            candidates: None,
+            init_energy: None,
+            same_structure: false,
+        }
+    }
 }
 
 /// No work beside an expansion's cycles (for [`CrfSolver::expansion_with`]).
@@ -687,11 +767,42 @@ impl<C: Cost> CrfSolver<C> {
     }
 
     fn check<'a>(&self, problem: &CrfProblem<'a, C>, metric: bool) -> Result<Checked<'a, C>> {
+        self.check_hinted(problem, metric, false)
+    }
+
+    /// Whether to take [`ExpansionHints::same_structure`] (`hinted`) for `problem`: only
+    /// where an expansion has summed its weights and the lengths agree.
+    fn structure_known(&self, problem: &CrfProblem<C>, hinted: bool) -> bool {
+        hinted
+            && self.weights_of_sums.is_some()
+            && problem.edges.len() == self.edges.len()
+            && problem.weights.len() == self.edges.len()
+    }
+
+    /// [`Self::check`], with the edges and weights not checked again where
+    /// `same_structure` (from [`Self::structure_known`]).
+    fn check_hinted<'a>(
+        &self,
+        problem: &CrfProblem<'a, C>,
+        metric: bool,
+        same_structure: bool,
+    ) -> Result<Checked<'a, C>> {
+        debug_assert!(
+            !same_structure
+                || (problem.edges == self.edges.as_slice()
+                    && self.weights_of_sums.as_deref() == Some(problem.weights)),
+            "ExpansionHints::same_structure given for a different structure"
+        );
         // The solver's own edges were checked against its node count when it was
         // built; equal edges and node count need no second range check.
-        let same_edges = problem.edges == self.edges.as_slice();
+        let same_edges = same_structure || problem.edges == self.edges.as_slice();
         let n = problem.unary.len() / problem.n_labels.max(1);
-        let c = check_problem(problem, metric, same_edges && n == self.graph.n_nodes())?;
+        let c = check_problem(
+            problem,
+            metric,
+            same_edges && n == self.graph.n_nodes(),
+            same_structure,
+        )?;
         ensure(c.n == self.graph.n_nodes(), "unary", || {
             format!(
                 "{} nodes, but the solver was built for {}",
@@ -713,8 +824,14 @@ impl<C: Cost> CrfSolver<C> {
         init: Option<&[i32]>,
         config: &MoveConfig,
     ) -> Result<Labelling<C>> {
-        self.expansion_with(problem, init, config, None, NO_WORK_BESIDE)
-            .map(|(labelling, _)| labelling)
+        self.expansion_with(
+            problem,
+            init,
+            config,
+            ExpansionHints::default(),
+            NO_WORK_BESIDE,
+        )
+        .map(|(labelling, _)| labelling)
     }
 
     /// [`Self::alpha_expansion`] with `beside` run on another worker of rayon's pool
@@ -739,34 +856,35 @@ impl<C: Cost> CrfSolver<C> {
         R: Send,
         F: FnMut(&[i32], &AtomicBool) -> R + Send,
     {
-        self.expansion_with(problem, init, config, None, Some(beside))
+        self.expansion_with(
+            problem,
+            init,
+            config,
+            ExpansionHints::default(),
+            Some(beside),
+        )
     }
 
-    /// [`Self::alpha_expansion`] (with `beside`, [`Self::alpha_expansion_beside`]); with
-    /// `candidates`, the per-label candidate sets the expansion starts from, computed
-    /// by the caller (in parallel, where it computes the unary terms): for each block
-    /// of 64 nodes `w` and label `a`, `candidates[w * l + a]` has bit `b` set where
-    /// node `64w + b`'s [`potts_candidate_mask`] (of its unary row, its `init` label
-    /// and its sum of edge weights in edge order) has bit `a` set. They are used when
-    /// the problem takes that form (Potts, nothing forbidden, at most 64 labels,
-    /// pruning on, finite weight sums), else the sets are collected here. Wrong sets
-    /// give a wrong labelling, hence crate-only.
+    /// [`Self::alpha_expansion`] (with `beside`, [`Self::alpha_expansion_beside`]),
+    /// sparing the work `hints` make unneeded. Wrong hints give a wrong labelling,
+    /// hence crate-only.
     pub(crate) fn expansion_with<R, F>(
         &mut self,
         problem: &CrfProblem<C>,
         init: Option<&[i32]>,
         config: &MoveConfig,
-        candidates: Option<&[u64]>,
+        hints: ExpansionHints<C>,
         mut beside: Option<&mut F>,
     ) -> Result<(Labelling<C>, Option<R>)>
     where
         R: Send,
         F: FnMut(&[i32], &AtomicBool) -> R + Send,
     {
-        let c = self.check(problem, true)?;
+        let same_structure = self.structure_known(problem, hints.same_structure);
+        let c = self.check_hinted(problem, true, same_structure)?;
         let labels = c.check_init(init)?;
-        self.prepare_expansion(&c);
-        match candidates {
+        self.prepare_expansion(&c, same_structure);
+        match hints.candidates {
             Some(words)
                 if self.masks_apply(&c)
                     && init.is_some()
@@ -777,7 +895,16 @@ impl<C: Cost> CrfSolver<C> {
             _ => self.collect_candidates(&c, &labels),
         }
         self.candidate.copy_from_slice(&labels);
-        let e = c.energy(&labels);
+        let e = match hints.init_energy {
+            Some(sum) if c.big == C::ZERO => {
+                debug_assert!(
+                    c.energy(&labels).sum == sum,
+                    "ExpansionHints::init_energy differs from the energy"
+                );
+                Energy { forbidden: 0, sum }
+            }
+            _ => c.energy(&labels),
+        };
         let mut run = ExpansionRun {
             labels,
             e,
@@ -813,8 +940,13 @@ impl<C: Cost> CrfSolver<C> {
         }
         // The moves update the energy by differences; the result is summed afresh so
         // that it equals `energy(labels)` exactly (floats may differ in the last bits
-        // from the running value, which the trace keeps).
-        let energy = c.energy(&run.labels).value();
+        // from the running value, which the trace keeps). With no move accepted the
+        // labels are the start's, whose energy was summed so.
+        let energy = if run.version == 0 {
+            run.e.value()
+        } else {
+            c.energy(&run.labels).value()
+        };
         let labelling = Labelling {
             labels: run.labels,
             energy,
@@ -898,10 +1030,10 @@ impl<C: Cost> CrfSolver<C> {
     }
 
     /// Per-problem set-up of the expansion moves: each node's sum of edge weights.
-    fn prepare_expansion(&mut self, c: &Checked<C>) {
+    fn prepare_expansion(&mut self, c: &Checked<C>, same_structure: bool) {
         // The edges are the solver's; with the weights of the last call the sums are
         // those already there (the EM's E-steps all have the same weights).
-        if self.weights_of_sums.as_deref() == Some(c.weights) {
+        if same_structure || self.weights_of_sums.as_deref() == Some(c.weights) {
             return;
         }
         let kept = self.weights_of_sums.get_or_insert_with(Vec::new);
@@ -935,7 +1067,7 @@ impl<C: Cost> CrfSolver<C> {
     ) -> Vec<u64> {
         let c = self.check(problem, true).unwrap();
         assert!(self.prune && c.potts);
-        self.prepare_expansion(&c);
+        self.prepare_expansion(&c, false);
         self.collect_candidates(&c, labels);
         let n_words = c.n.div_ceil(64);
         (0..n_words * c.l)
@@ -1440,6 +1572,25 @@ mod tests {
             prop_assert_eq!(rf.labels, r.labels);
             prop_assert_eq!(rf.energy, r.energy as f64);
         }
+
+        /// The lane-summed check of float costs is the value-by-value definition, for
+        /// any length (the tail past the last eight) and any bad value anywhere.
+        #[test]
+        fn float_plain_check_is_the_definition(
+            values in prop::collection::vec(-1e300f64..1e300, 0..40),
+            bad in prop::option::of((0usize..40, 0usize..4)),
+        ) {
+            let mut values = values;
+            if let Some((at, which)) = bad {
+                if !values.is_empty() {
+                    let k = at % values.len();
+                    values[k] = [f64::INFINITY, f64::NEG_INFINITY, f64::NAN, 1e308 * 10.0][which];
+                }
+            }
+            let definition = values.iter().all(|&u| u.is_finite() && u != f64::FORBIDDEN);
+            prop_assert_eq!(<f64 as Cost>::all_plain(&values), definition);
+            prop_assert_eq!(<i64 as Cost>::all_plain(&[1, 2, i64::MAX]), false);
+        }
     }
 
     #[test]
@@ -1487,7 +1638,9 @@ mod tests {
     }
 
     fn c_init(p: &CrfProblem<i64>) -> Vec<i32> {
-        check_problem(p, false, false).unwrap().argmin_unary()
+        check_problem(p, false, false, false)
+            .unwrap()
+            .argmin_unary()
     }
 
     #[test]
@@ -1647,12 +1800,12 @@ mod tests {
             let labels: Vec<i32> = (0..n)
                 .map(|i| ((seed as usize / (i + 1) + i * 7) % p.l) as i32)
                 .collect();
-            let c = check_problem(&v, true, false).unwrap();
+            let c = check_problem(&v, true, false, false).unwrap();
             let e0 = c.energy(&labels);
             // One solver for every move in turn: the graph is cleared only where the
             // previous move touched it.
             let mut s = CrfSolver::new(n, &p.edges).unwrap();
-            s.prepare_expansion(&c);
+            s.prepare_expansion(&c, false);
             for k in 0..2 * p.l {
                 let alpha = ((seed as usize + k) % p.l) as i32;
                 let best = best_move(&v, &labels, alpha);
@@ -1678,9 +1831,9 @@ mod tests {
         init: &[i32],
         cycles: usize,
     ) -> Vec<i32> {
-        let c = check_problem(p, true, false).unwrap();
+        let c = check_problem(p, true, false, false).unwrap();
         let mut s = CrfSolver::new(c.n, p.edges).unwrap();
-        s.prepare_expansion(&c);
+        s.prepare_expansion(&c, false);
         let mut labels = init.to_vec();
         let mut e = c.energy(&labels);
         for _ in 0..cycles {
