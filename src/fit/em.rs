@@ -430,10 +430,12 @@ fn unary_chunk(
     let labels_and_slack = held.as_ref().map(|(l, w, _)| (*l, *w));
     let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
     let buf = to_f64(pts, &mut buf);
-    // Per point: its label (none: −1) and the most another label may cost and still be
-    // within the expansion's reach (then as the residual of that cost).
-    let mut own = [-1i32; CHUNK_POINTS];
+    // Per point: the most another label may cost and still be within the expansion's
+    // reach (then as the residual of that cost).
     let mut reach = [f64::INFINITY; CHUNK_POINTS];
+    // With labels: the points by label (each label's in ascending order) and where
+    // each label's start.
+    let mut held_order = None;
     let mut skipped: &mut [u32] = &mut [];
     // Every segment's term starts at the cap (a whole row at a time); the own label's
     // and the near points' exact costs overwrite it below.
@@ -442,7 +444,6 @@ fn unary_chunk(
         row[NUM_SEGMENTS] = outlier;
     }
     if let Some((labels, slack, sk)) = held {
-        own[..labels.len()].copy_from_slice(labels);
         sk.fill(0);
         skipped = sk;
         for (i, &l) in labels.iter().enumerate() {
@@ -491,56 +492,98 @@ fn unary_chunk(
             // rounding, far inside the margin).
             *r = pc.residual_within(*r);
         }
+        held_order = Some((by_label, start));
     }
     let known = !skipped.is_empty();
-    // The points one coordinate per array, for the vectorised split below.
     let n = pts.len();
+    // The points in groups: with labels, one per label (the counting sort's order),
+    // else one of all the points in order. `order[j]` is the chunk index of the j-th.
+    let identity: [u16; CHUNK_POINTS] = std::array::from_fn(|j| j as u16);
+    let (order, groups) = match &held_order {
+        Some((by_label, start)) => (&by_label[..n], &start[..]),
+        None => (&identity[..n], &[0, n][..]),
+    };
+    // The points one coordinate per array in group order, for the vectorised split
+    // below.
     let mut soa = [[0.0f64; CHUNK_POINTS]; 3];
-    for (i, p) in buf.iter().enumerate() {
+    for (j, &i) in order.iter().enumerate() {
         for r in 0..3 {
-            soa[r][i] = p[r];
+            soa[r][j] = buf[i as usize][r];
         }
+    }
+    // Each group's label (none: −1), bounding box and largest reach (as a residual;
+    // none without labels). Smaller blocks (of 32 points within a label) culled no
+    // more on the bench frame: its segments' bounding spheres are loose.
+    let n_groups = groups.len() - 1;
+    let mut boxes = [([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]); NUM_LABELS];
+    let mut group_reach = [f64::INFINITY; NUM_LABELS];
+    for g in 0..n_groups {
+        let (lo, hi) = &mut boxes[g];
+        let mut most = f64::NEG_INFINITY;
+        for j in groups[g]..groups[g + 1] {
+            for r in 0..3 {
+                lo[r] = lo[r].min(soa[r][j]);
+                hi[r] = hi[r].max(soa[r][j]);
+            }
+            most = most.max(reach[order[j] as usize]);
+        }
+        group_reach[g] = most;
     }
     let mut local = [[0.0f64; CHUNK_POINTS]; 3];
     let mut beyond = [false; CHUNK_POINTS];
+    // Group positions j of the points that need a segment's exact distance.
     let mut near = [0u16; CHUNK_POINTS];
-    // The chunk's bounding box: a segment whose bounding sphere, grown by the
-    // truncation, stays clear of it has every point of the chunk beyond the truncation.
-    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for p in buf.iter() {
-        for r in 0..3 {
-            lo[r] = lo[r].min(p[r]);
-            hi[r] = hi[r].max(p[r]);
-        }
-    }
+    let margin = |x: f64| x * (1.0 + 1e-9) + 1e-9;
     for (k, e) in geo.segments.iter().enumerate() {
-        // The per-point test below (|y| ≥ e_max + t) would mark every point of the
-        // chunk beyond, so skipping the segment changes nothing. The margin covers the
-        // rounding of that test's local coordinates (relative ~1e-15).
         let c = e.centre();
-        let gap2: f64 = (0..3)
-            .map(|r| (lo[r] - c[r]).max(c[r] - hi[r]).max(0.0).powi(2))
-            .sum();
-        let clear = (e.max_radius() + pc.truncation) * (1.0 + 1e-9) + 1e-9;
-        if pc.truncation > 0.0 && gap2 >= clear * clear {
-            continue;
-        }
-        // A lower bound of the distance at or beyond the truncation means the cost is
-        // the cap, exactly what the exact distance would give; only the points nearer
-        // than that need the exact (iterative) distance.
-        let [l0, l1, l2] = &mut local;
-        e.locals_beyond(
-            &e.beyond(pc.truncation),
-            [&soa[0][..n], &soa[1][..n], &soa[2][..n]],
-            [&mut l0[..n], &mut l1[..n], &mut l2[..n]],
-            &mut beyond[..n],
-        );
-        // The near points, in order, go to the exact distance (the far ones keep the
-        // cap, the own label's term is there already).
+        let clear_truncation = margin(e.max_radius() + pc.truncation);
+        let beyond_truncation = e.beyond(pc.truncation);
         let mut m = 0;
-        for i in 0..n {
-            near[m] = i as u16;
-            m += usize::from(!beyond[i] && own[i] != k as i32);
+        for g in 0..n_groups {
+            let range = groups[g]..groups[g + 1];
+            // The own label's terms are there already.
+            if range.is_empty() || (known && g == k) {
+                continue;
+            }
+            // A group whose box stays clear of the segment's bounding sphere grown by
+            // the truncation has every point beyond the truncation (the per-point test
+            // |y| ≥ e_max + t below would say so): its terms are the cap, exactly
+            // what the exact distance would give. Grown by the group's largest reach,
+            // every point's distance lower bound passes its reach: each term is left
+            // out as the per-point skip test below would (the points also beyond the
+            // truncation are marked skipped too: their terms are the cap either way).
+            // The margins cover the rounding of the per-point tests (relative ~1e-15).
+            let (lo, hi) = &boxes[g];
+            let gap2: f64 = (0..3)
+                .map(|r| (lo[r] - c[r]).max(c[r] - hi[r]).max(0.0).powi(2))
+                .sum();
+            if pc.truncation > 0.0 && gap2 >= clear_truncation * clear_truncation {
+                continue;
+            }
+            if known {
+                let clear_reach = margin(e.max_radius() + group_reach[g]);
+                if gap2 >= clear_reach * clear_reach {
+                    for &i in &order[range] {
+                        skipped[i as usize] |= 1 << k;
+                    }
+                    continue;
+                }
+            }
+            // A lower bound of the distance at or beyond the truncation means the cost
+            // is the cap, exactly what the exact distance would give; only the points
+            // nearer than that need the exact (iterative) distance.
+            let [l0, l1, l2] = &mut local;
+            let r = range.clone();
+            e.locals_beyond(
+                &beyond_truncation,
+                [&soa[0][r.clone()], &soa[1][r.clone()], &soa[2][r.clone()]],
+                [&mut l0[r.clone()], &mut l1[r.clone()], &mut l2[r.clone()]],
+                &mut beyond[r],
+            );
+            for j in range {
+                near[m] = j as u16;
+                m += usize::from(!beyond[j]);
+            }
         }
         if known {
             // Also the points whose cost is certainly beyond reach: whose distance's
@@ -548,19 +591,20 @@ fn unary_chunk(
             // Branch-free: which points pass is data-dependent, and a branch per point
             // was mispredicted often enough to show in profiles.
             let mut kept = 0;
-            for j in 0..m {
-                let i = near[j] as usize;
-                let y = [local[0][i], local[1][i], local[2][i]];
+            for q in 0..m {
+                let j = near[q] as usize;
+                let i = order[j] as usize;
+                let y = [local[0][j], local[1][j], local[2][j]];
                 let skip = e.lower_bound_passes(&y, reach[i]);
                 skipped[i] |= u32::from(skip) << k;
-                near[kept] = near[j];
+                near[kept] = near[q];
                 kept += usize::from(!skip);
             }
             m = kept;
         }
-        let items = near[..m].iter().map(|&i| {
-            let i = i as usize;
-            (i, [local[0][i], local[1][i], local[2][i]])
+        let items = near[..m].iter().map(|&j| {
+            let j = j as usize;
+            (order[j] as usize, [local[0][j], local[1][j], local[2][j]])
         });
         e.signed_distances_batched(items, |i, d| u[i * NUM_LABELS + k] = pc.cost(d));
     }
@@ -724,6 +768,15 @@ impl<'g> EStep<'g> {
     /// [`Self::new`] with its unary terms at `pose` and `tau` ([`Self::set_pose`]
     /// with `labels`). The expansion solver's graph is built on one worker of rayon's
     /// pool while the others compute the edge weights and the unary terms.
+    ///
+    /// Without `labels` (a fresh start, for [`Self::cheapest_labels`]) the terms are
+    /// those for every point held at the outlier label: a term that exceeds the
+    /// outlier's cost by more than the point's slack is left out (and set to the cap,
+    /// marked skipped). The outlier's cost bounds the cheapest label's from above, so
+    /// such a term is neither the cheapest nor, with cap or exact value alike, a
+    /// candidate for the expansion from the cheapest labels: both come out as with
+    /// every term exact, and the terms stay as exact as every later E-step's (see
+    /// [`unary_costs_for_labels`]).
     #[allow(clippy::too_many_arguments)]
     fn at_pose(
         graph: &'g PixelGraph,
@@ -741,7 +794,15 @@ impl<'g> EStep<'g> {
                 // A solver for no nodes stands in until the real one is built.
                 let empty = CrfSolver::new(0, &[]).expect("no edges to check");
                 let mut crf = Self::with_solver(graph, n, config, empty);
-                crf.set_pose(model, points, pose, config, tau, labels, None);
+                let outliers;
+                let held = match labels {
+                    Some(labels) => labels,
+                    None => {
+                        outliers = vec![OUTLIER; n];
+                        &outliers
+                    }
+                };
+                crf.set_pose(model, points, pose, config, tau, Some(held), None);
                 crf
             },
         );
