@@ -434,7 +434,7 @@ fn unary_chunk(
     // reach (then as the residual of that cost).
     let mut reach = [f64::INFINITY; CHUNK_POINTS];
     // With labels: the points by label (each label's in ascending order) and where
-    // each label's start.
+    // each label's points start.
     let mut held_order = None;
     let mut skipped: &mut [u32] = &mut [];
     // Every segment's term starts at the cap (a whole row at a time); the own label's
@@ -511,9 +511,9 @@ fn unary_chunk(
             soa[r][j] = buf[i as usize][r];
         }
     }
-    // Each group's label (none: −1), bounding box and largest reach (as a residual;
-    // none without labels). Smaller blocks (of 32 points within a label) culled no
-    // more on the bench frame: its segments' bounding spheres are loose.
+    // Each group's bounding box and largest reach (as a residual; none without
+    // labels). Smaller blocks (of 32 points within a label) culled no more on the
+    // bench frame: its segments' bounding spheres are loose.
     let n_groups = groups.len() - 1;
     let mut boxes = [([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]); NUM_LABELS];
     let mut group_reach = [f64::INFINITY; NUM_LABELS];
