@@ -629,6 +629,34 @@ fn fill_candidate_words(u: &[f64], labels: &[i32], slack: &[f64], words: &mut [u
     }
 }
 
+/// A cheap guess of each point's segment at `pose`: the one whose centre is nearest in
+/// units of its largest half-axis (on the bench frame this left out more terms than the
+/// nearest bounding sphere did).
+fn nearest_segment_guess(model: &BodyModel, points: &[[f32; 3]], pose: &Pose) -> Vec<i32> {
+    let geo = PoseGeometry::new(model, pose);
+    let centres: [[f64; 3]; NUM_SEGMENTS] = std::array::from_fn(|k| geo.segments[k].centre());
+    let inv_r2: [f64; NUM_SEGMENTS] =
+        std::array::from_fn(|k| 1.0 / geo.segments[k].max_radius().powi(2));
+    points
+        .par_iter()
+        .with_min_len(CHUNK_POINTS)
+        .map(|p| {
+            let mut best = (f64::INFINITY, 0);
+            for k in 0..NUM_SEGMENTS {
+                let c = &centres[k];
+                let d2 = (p[0] as f64 - c[0]).powi(2)
+                    + (p[1] as f64 - c[1]).powi(2)
+                    + (p[2] as f64 - c[2]).powi(2);
+                let v = d2 * inv_r2[k];
+                if v < best.0 {
+                    best = (v, k as i32);
+                }
+            }
+            best.1
+        })
+        .collect()
+}
+
 /// The label of least cost in a unary row (the first of equals).
 fn cheapest_label(row: &[f64]) -> i32 {
     (0..row.len())
@@ -770,13 +798,14 @@ impl<'g> EStep<'g> {
     /// pool while the others compute the edge weights and the unary terms.
     ///
     /// Without `labels` (a fresh start, for [`Self::cheapest_labels`]) the terms are
-    /// those for every point held at the outlier label: a term that exceeds the
-    /// outlier's cost by more than the point's slack is left out (and set to the cap,
-    /// marked skipped). The outlier's cost bounds the cheapest label's from above, so
-    /// such a term is neither the cheapest nor, with cap or exact value alike, a
-    /// candidate for the expansion from the cheapest labels: both come out as with
-    /// every term exact, and the terms stay as exact as every later E-step's (see
-    /// [`unary_costs_for_labels`]).
+    /// those for every point held at a guessed segment ([`nearest_segment_guess`]): a
+    /// term that exceeds the guess's cost by more than the point's slack is left out
+    /// (and set to the cap, marked skipped). Any label's cost bounds the cheapest
+    /// label's from above, so such a term is neither the cheapest nor, with cap or
+    /// exact value alike, a candidate for the expansion from the cheapest labels: both
+    /// come out as with every term exact, and the terms stay as exact as every later
+    /// E-step's (see [`unary_costs_for_labels`]). (Holding every point at the outlier
+    /// label, whose cost needs no distance, left out fewer: its reach is ≈ τ.)
     #[allow(clippy::too_many_arguments)]
     fn at_pose(
         graph: &'g PixelGraph,
@@ -794,12 +823,12 @@ impl<'g> EStep<'g> {
                 // A solver for no nodes stands in until the real one is built.
                 let empty = CrfSolver::new(0, &[]).expect("no edges to check");
                 let mut crf = Self::with_solver(graph, n, config, empty);
-                let outliers;
+                let guess;
                 let held = match labels {
                     Some(labels) => labels,
                     None => {
-                        outliers = vec![OUTLIER; n];
-                        &outliers
+                        guess = nearest_segment_guess(model, points, pose);
+                        &guess
                     }
                 };
                 crf.set_pose(model, points, pose, config, tau, Some(held), None);
@@ -1688,6 +1717,48 @@ mod tests {
                 !crf.candidates_valid,
                 "the settled terms are not the sets' terms"
             );
+        }
+    }
+
+    /// A fresh start's terms (held at guessed segments, see `EStep::at_pose`) give the
+    /// cheapest labels and candidate sets of the exact terms, bit for bit; every term
+    /// is exact or skipped (the cap, out of the cheapest label's reach), and the
+    /// expansion from them ends where the one on exact terms does.
+    #[test]
+    fn fresh_start_terms_give_the_exact_cheapest_labels_and_sets() {
+        let model = BodyModel::default();
+        let (truth, cloud, graph) = bent_frame(&model, crate::body::param::L_ELBOW, 1.1);
+        let (points, n) = (&cloud.points, cloud.len());
+        let config = EmConfig::default();
+        for (seed, tau) in [(7, config.outlier_distance_at(0)), (8, 0.1)] {
+            let start = crate::fit::tests::perturbed(&truth, seed, 0.3, 0.08);
+            let mut exact = EStep::new(&graph, n, &config).unwrap();
+            exact.set_pose(&model, points, &start, &config, tau, None, None);
+            let want = exact.cheapest_labels();
+            let mut fresh =
+                EStep::at_pose(&graph, &model, points, &start, &config, tau, None).unwrap();
+            let got = fresh.cheapest_labels();
+            assert_eq!(got, want);
+            assert_eq!(fresh.candidate_words, exact.candidate_words);
+            let cap = config.point_cost(tau).cap();
+            let mut n_skipped = 0;
+            for i in 0..n {
+                let row = i * NUM_LABELS..(i + 1) * NUM_LABELS;
+                let (f, e) = (&fresh.unary[row.clone()], &exact.unary[row]);
+                for k in 0..NUM_LABELS {
+                    if fresh.skipped[i] >> k & 1 == 1 {
+                        n_skipped += 1;
+                        assert_eq!(f[k], cap);
+                        assert!(e[k] - e[want[i] as usize] > fresh.slack[i], "{i} {k}");
+                    } else {
+                        assert_eq!(f[k], e[k], "{i} {k}");
+                    }
+                }
+            }
+            assert!(n_skipped > n, "{n_skipped} terms left out");
+            let a = fresh.expand(&model, points, &config, &got, None).unwrap();
+            let b = exact.expand(&model, points, &config, &want, None).unwrap();
+            assert_eq!(a.labels, b.labels);
         }
     }
 
