@@ -831,7 +831,7 @@ impl<'g> EStep<'g> {
                         &guess
                     }
                 };
-                crf.set_pose(model, points, pose, config, tau, Some(held), None);
+                crf.set_pose(model, points, pose, config, tau, held, None);
                 crf
             },
         );
@@ -873,12 +873,11 @@ impl<'g> EStep<'g> {
         }
     }
 
-    /// The unary terms of `points` at `pose` and outlier distance `tau`: all of them,
-    /// or with `labels` (the labels the next expansion starts from) those it can use,
-    /// and then also the expansion's candidate sets for `labels` (computed in the same
-    /// parallel pass, so that the expansion need not collect them on one thread).
-    /// With `labels`, `own` may give the points' distances to their labels' ellipsoids
-    /// at `pose` (see [`fill_unary`]).
+    /// The unary terms of `points` at `pose` and outlier distance `tau` that an
+    /// expansion from `labels` can use (see [`unary_costs_for_labels`]), and also the
+    /// expansion's candidate sets for `labels` (computed in the same parallel pass, so
+    /// that the expansion need not collect them on one thread). `own` may give the
+    /// points' distances to their labels' ellipsoids at `pose` (see [`fill_unary`]).
     #[allow(clippy::too_many_arguments)]
     fn set_pose(
         &mut self,
@@ -887,40 +886,49 @@ impl<'g> EStep<'g> {
         pose: &Pose,
         config: &EmConfig,
         tau: f64,
-        labels: Option<&[i32]>,
+        labels: &[i32],
         own: Option<&[f64]>,
     ) {
         self.pose = *pose;
         self.tau = tau;
+        let held = HeldLabels {
+            labels,
+            slack: &self.slack,
+            skipped: &mut self.skipped,
+        };
+        let words = Some(&mut self.candidate_words[..]);
+        fill_unary(
+            model,
+            points,
+            pose,
+            config,
+            tau,
+            Some(held),
+            own,
+            &mut self.unary,
+            words,
+        );
+        self.candidates_for.clear();
+        self.candidates_for.extend_from_slice(labels);
+        self.candidates_valid = true;
+    }
+
+    /// Every unary term at `pose` and `tau`, exact (no labels held): the reference the
+    /// tests compare the E-step's terms with.
+    #[cfg(test)]
+    fn set_all_terms(
+        &mut self,
+        model: &BodyModel,
+        points: &[[f32; 3]],
+        pose: &Pose,
+        config: &EmConfig,
+        tau: f64,
+    ) {
+        self.pose = *pose;
+        self.tau = tau;
         self.candidates_valid = false;
-        match labels {
-            None => {
-                self.skipped.fill(0);
-                unary_costs(model, points, pose, config, tau, &mut self.unary)
-            }
-            Some(labels) => {
-                let held = HeldLabels {
-                    labels,
-                    slack: &self.slack,
-                    skipped: &mut self.skipped,
-                };
-                let words = Some(&mut self.candidate_words[..]);
-                fill_unary(
-                    model,
-                    points,
-                    pose,
-                    config,
-                    tau,
-                    Some(held),
-                    own,
-                    &mut self.unary,
-                    words,
-                );
-                self.candidates_for.clear();
-                self.candidates_for.extend_from_slice(labels);
-                self.candidates_valid = true;
-            }
-        }
+        self.skipped.fill(0);
+        unary_costs(model, points, pose, config, tau, &mut self.unary)
     }
 
     /// The CRF energy of `labels` (without the prior).
@@ -1333,15 +1341,7 @@ fn run_hard_em(
             // rejected one).
             let own = objective.kept_distances(&new_pose, &labels, &mut own_distance);
             let own = own.then_some(&own_distance[..]);
-            crf.set_pose(
-                model,
-                points,
-                &new_pose,
-                config,
-                next_tau,
-                Some(&labels),
-                own,
-            );
+            crf.set_pose(model, points, &new_pose, config, next_tau, &labels, own);
             let crf_energy = crf.energy(&labels);
             let e = crf_energy + pose_cost(&new_pose);
             if e <= energy {
@@ -1351,14 +1351,14 @@ fn run_hard_em(
                 labels_energy = Some(crf_energy);
             } else {
                 // Cannot happen in exact arithmetic; keep the better state.
-                crf.set_pose(model, points, &pose, config, tau, Some(&labels), None);
+                crf.set_pose(model, points, &pose, config, tau, &labels, None);
                 labels_energy = None;
             }
             trace.push(energy);
         }
         if next_tau != tau {
             tau = next_tau;
-            crf.set_pose(model, points, &pose, config, tau, Some(&labels), None);
+            crf.set_pose(model, points, &pose, config, tau, &labels, None);
             let crf_energy = crf.energy(&labels);
             energy = crf_energy + pose_cost(&pose);
             labels_energy = Some(crf_energy);
@@ -1657,7 +1657,7 @@ mod tests {
         let tau = config.outlier_distance_at(0);
         let mut crf = EStep::new(&graph, n, &config).unwrap();
         let start = crate::fit::tests::perturbed(&truth, 3, 0.2, 0.05);
-        crf.set_pose(&model, points, &start, &config, tau, None, None);
+        crf.set_all_terms(&model, points, &start, &config, tau);
         assert!(!crf.candidates_valid);
         let cheapest = crf.cheapest_labels();
         // The cheapest labels (first of equals) and, for them, the sets the solver
@@ -1691,7 +1691,7 @@ mod tests {
             .collect();
         let near = crate::fit::tests::perturbed(&truth, 4, 0.1, 0.02);
         for held in [&labels, &mixed] {
-            crf.set_pose(&model, points, &near, &config, tau, Some(held), None);
+            crf.set_pose(&model, points, &near, &config, tau, held, None);
             assert!(crf.candidates_valid);
             let p = problem(&crf.unary, &graph.edges, &crf.weights);
             let mut solver = CrfSolver::new(n, &graph.edges).unwrap();
@@ -1733,7 +1733,7 @@ mod tests {
         for (seed, tau) in [(7, config.outlier_distance_at(0)), (8, 0.1)] {
             let start = crate::fit::tests::perturbed(&truth, seed, 0.3, 0.08);
             let mut exact = EStep::new(&graph, n, &config).unwrap();
-            exact.set_pose(&model, points, &start, &config, tau, None, None);
+            exact.set_all_terms(&model, points, &start, &config, tau);
             let want = exact.cheapest_labels();
             let mut fresh =
                 EStep::at_pose(&graph, &model, points, &start, &config, tau, None).unwrap();
@@ -1801,17 +1801,9 @@ mod tests {
         );
         for tau in [tau, config.outlier_distance_at(1), config.outlier_distance] {
             let mut computed = EStep::new(&graph, n, &config).unwrap();
-            computed.set_pose(&model, points, &pose, &config, tau, Some(&labels), None);
+            computed.set_pose(&model, points, &pose, &config, tau, &labels, None);
             let mut given = EStep::new(&graph, n, &config).unwrap();
-            given.set_pose(
-                &model,
-                points,
-                &pose,
-                &config,
-                tau,
-                Some(&labels),
-                Some(&own),
-            );
+            given.set_pose(&model, points, &pose, &config, tau, &labels, Some(&own));
             assert!(computed.unary == given.unary, "τ {tau}");
             assert_eq!(computed.skipped, given.skipped, "τ {tau}");
             assert_eq!(computed.candidate_words, given.candidate_words, "τ {tau}");
@@ -1853,9 +1845,8 @@ mod tests {
         let labels: Vec<i32> = (0..n)
             .map(|i| {
                 let row = &exact[i * NUM_LABELS..(i + 1) * NUM_LABELS];
-                let cheapest = (0..NUM_LABELS).min_by(|&a, &b| row[a].total_cmp(&row[b]));
                 match i % 2 {
-                    0 => cheapest.unwrap() as i32,
+                    0 => cheapest_label(row),
                     _ => (next() * 17.0) as i32 % 17,
                 }
             })
