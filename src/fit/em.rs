@@ -498,10 +498,14 @@ fn unary_chunk(
     let n = pts.len();
     // The points in groups: with labels, one per label (the counting sort's order),
     // else one of all the points in order. `order[j]` is the chunk index of the j-th.
-    let identity: [u16; CHUNK_POINTS] = std::array::from_fn(|j| j as u16);
+    let identity: [u16; CHUNK_POINTS];
+    let all = [0, n];
     let (order, groups) = match &held_order {
         Some((by_label, start)) => (&by_label[..n], &start[..]),
-        None => (&identity[..n], &[0, n][..]),
+        None => {
+            identity = std::array::from_fn(|j| j as u16);
+            (&identity[..n], &all[..])
+        }
     };
     // The points one coordinate per array in group order, for the vectorised split
     // below.
