@@ -344,6 +344,27 @@ def test_resumed_fit_equals_the_longer_fit():
         dp.fit_pose(depth, CAM, brief.pose, resume="brief")
 
 
+def test_a_settled_fit_cuts_its_annealing_and_resumes_after_the_cut():
+    model = BodyModel()
+    truth = natural_pose(model)
+    depth, _ = model.render_depth(truth, CAM)
+    # Half the usual perturbation: a start that settles early.
+    init = truth + 0.5 * (perturbed(model, truth, np.random.default_rng(6)) - truth)
+    cut = dp.fit_pose(depth, CAM, init, model=model)
+    full = dp.fit_pose(depth, CAM, init, model=model, config={"adaptive_anneal": False})
+    k = cut.anneal_cut
+    assert k is not None and k + 1 < dp.FitConfig().anneal_iterations
+    assert full.anneal_cut is None and cut.iterations < full.iterations
+    assert cut.converged and np.all(np.diff(cut.energy_trace) <= 0)
+    assert np.abs(cut.joints - full.joints).max() < 1e-3
+    # Stopped right after the cut, then continued: the uninterrupted fit.
+    brief = dp.fit_pose(depth, CAM, init, model=model, config={"max_iterations": k})
+    assert brief.anneal_cut == k
+    resumed = dp.fit_pose(depth, CAM, brief.pose, model=model, resume=brief)
+    assert np.array_equal(resumed.pose, cut.pose) and resumed.iterations == cut.iterations
+    assert resumed.anneal_cut == k
+
+
 def test_prior_holds_the_pose():
     model = BodyModel()
     truth = natural_pose(model)
@@ -405,6 +426,9 @@ def test_bad_input_names_the_argument():
         dp.FitConfig(free_space_margin=float("nan"))
     with pytest.raises(dp.InvalidInputError, match="free_space_truncation"):
         dp.FitConfig(free_space_truncation=0.0)
+    for v in (-1e-3, float("nan")):
+        with pytest.raises(dp.InvalidInputError, match="settled_joint_motion"):
+            dp.FitConfig(settled_joint_motion=v)
     for stride in (0, -1, 9):
         with pytest.raises(dp.InvalidInputError, match="stride"):
             dp.FitConfig(stride=stride)

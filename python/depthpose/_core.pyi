@@ -301,6 +301,8 @@ class FitConfig:
     outlier_distance: float
     outlier_distance_start: float
     anneal_iterations: int
+    adaptive_anneal: bool
+    settled_joint_motion: float
     truncation_factor: float
     max_iterations: int
     label_change_tolerance: float
@@ -328,6 +330,8 @@ class FitConfig:
         outlier_distance: float | None = None,
         outlier_distance_start: float | None = None,
         anneal_iterations: int | None = None,
+        adaptive_anneal: bool | None = None,
+        settled_joint_motion: float | None = None,
         truncation_factor: float | None = None,
         max_iterations: int | None = None,
         label_change_tolerance: float | None = None,
@@ -362,6 +366,8 @@ class FitResult:
     def converged(self) -> bool: ...
     @property
     def reason(self) -> str: ...
+    @property
+    def anneal_cut(self) -> int | None: ...
     @property
     def part_counts(self) -> dict[str, int]: ...
     @property

@@ -66,6 +66,15 @@ pub struct EmConfig {
     pub outlier_distance_start: f64,
     /// τ reaches its final value after this many iterations.
     pub anneal_iterations: usize,
+    /// Once the fit has settled while τ is still annealing (at most
+    /// `label_change_tolerance` of the labels changed and no joint moved more than
+    /// `settled_joint_motion` in an iteration), τ jumps to its final value for the next
+    /// iteration instead of stepping down to it over the remaining ones: a settled fit
+    /// needs no more gradual tightening, and a fit still moving anneals as before
+    /// ([`EmResult::anneal_cut`]).
+    pub adaptive_anneal: bool,
+    /// See `adaptive_anneal` (m).
+    pub settled_joint_motion: f64,
     /// Residuals beyond this multiple of τ are truncated (≥ 1).
     pub truncation_factor: f64,
     /// At most this many E/M iterations.
@@ -98,6 +107,8 @@ impl Default for EmConfig {
             outlier_distance: 0.1,
             outlier_distance_start: 0.2,
             anneal_iterations: 6,
+            adaptive_anneal: true,
+            settled_joint_motion: 1e-3,
             truncation_factor: 2.0,
             max_iterations: 20,
             label_change_tolerance: 0.002,
@@ -167,6 +178,11 @@ impl EmConfig {
             "label_change_tolerance",
             || format!("must be within 0..1, got {}", self.label_change_tolerance),
         )?;
+        ensure(
+            nonneg(self.settled_joint_motion),
+            "settled_joint_motion",
+            || format!("must be finite and >= 0, got {}", self.settled_joint_motion),
+        )?;
         ensure(nonneg(self.energy_tolerance), "energy_tolerance", || {
             format!("must be finite and >= 0, got {}", self.energy_tolerance)
         })?;
@@ -185,6 +201,16 @@ impl EmConfig {
             || format!("must be finite and > 0, got {}", self.free_space_truncation),
         )?;
         self.lm.validate()
+    }
+
+    /// τ of iteration `it`'s E-step (0: the initial one) in a run whose annealing was
+    /// cut after iteration `cut` ([`EmResult::anneal_cut`]): the final value after the
+    /// cut, else [`Self::outlier_distance_at`].
+    pub fn outlier_distance_in(&self, it: usize, cut: Option<usize>) -> f64 {
+        match cut {
+            Some(k) if k < it => self.outlier_distance,
+            _ => self.outlier_distance_at(it),
+        }
     }
 
     /// τ at iteration `it` (0-based): geometric from the start value to the final one.
@@ -254,6 +280,10 @@ pub struct EmResult {
     pub energy_trace: Vec<f64>,
     pub iterations: usize,
     pub termination: EmTermination,
+    /// Some(k): the fit had settled at iteration k while τ was still annealing, and τ
+    /// took its final value from iteration k + 1 on ([`EmConfig::adaptive_anneal`]; a
+    /// resumed run continues so).
+    pub anneal_cut: Option<usize>,
     /// Points per segment.
     pub part_counts: [usize; NUM_SEGMENTS],
     /// Points labelled outlier.
@@ -1087,11 +1117,13 @@ pub fn hard_em(
 }
 
 /// An EM run to continue (see [`hard_em_from`]): the per-point labels it ended with
-/// (segment 0..15 or [`OUTLIER`]) and the iterations it ran.
+/// (segment 0..15 or [`OUTLIER`]), the iterations it ran and where its annealing was
+/// cut ([`EmResult::anneal_cut`]).
 #[derive(Debug, Clone, Copy)]
 pub struct EmResume<'a> {
     pub labels: &'a [i32],
     pub iterations: usize,
+    pub anneal_cut: Option<usize>,
 }
 
 /// [`hard_em`], or with `resume` its continuation: from `init` (the pose that run
@@ -1272,7 +1304,8 @@ fn run_hard_em(
     }
     let mut pose = BodyModel::clamp_pose(init);
     let mut iterations = resume.map_or(0, |r| r.iterations);
-    let mut tau = config.outlier_distance_at(iterations);
+    let mut anneal_cut = resume.and_then(|r| r.anneal_cut);
+    let mut tau = config.outlier_distance_in(iterations, anneal_cut);
     // The unary terms at the start: for a resumed run those its labels need, else all
     // of them (for the cheapest labels).
     let resumed_labels = resume.map(|r| r.labels);
@@ -1326,6 +1359,7 @@ fn run_hard_em(
     while iterations < config.max_iterations {
         iterations += 1;
         let energy_at_start = energy;
+        let joints_at_start = model.joints(&pose);
         // M-step (the objective was built for the first one).
         let (new_pose, report) = match next_m_step.take() {
             Some(done) => done,
@@ -1338,7 +1372,7 @@ fn run_hard_em(
         // Anneal τ: every unary term can only drop. The unary terms for the moved pose
         // are computed once, at the next τ: E(new pose, next τ) ≤ E(new pose, τ) ≤
         // E(pose, τ), so the energy still never increases (checked, not assumed).
-        let next_tau = config.outlier_distance_at(iterations);
+        let next_tau = config.outlier_distance_in(iterations, anneal_cut);
         if pose_moved {
             // The points' own-label distances at the new pose, from the M-step's last
             // evaluation (when it was at that pose: LM's last trial may have been a
@@ -1435,18 +1469,35 @@ fn run_hard_em(
         ahead.used += usize::from(next_m_step.is_some());
         last_changed = Some(changed);
         trace.push(energy);
-        let annealed = iterations >= config.anneal_iterations;
+        // Whether this iteration's E-step had the final τ.
+        let annealed =
+            iterations >= config.anneal_iterations || anneal_cut.is_some_and(|k| k < iterations);
         if changed == 0 && !pose_moved {
             termination = EmTermination::Stationary;
             break;
         }
         let drop = energy_at_start - energy;
-        if annealed
-            && (changed as f64) <= config.label_change_tolerance * n as f64
-            && drop <= config.energy_tolerance * energy.abs()
-        {
+        let labels_settled = (changed as f64) <= config.label_change_tolerance * n as f64;
+        if annealed && labels_settled && drop <= config.energy_tolerance * energy.abs() {
             termination = EmTermination::Converged;
             break;
+        }
+        // (Only a cut before the schedule's last step changes anything.)
+        if !annealed
+            && config.adaptive_anneal
+            && labels_settled
+            && iterations + 1 < config.anneal_iterations
+        {
+            let moved = model
+                .joints(&pose)
+                .iter()
+                .zip(&joints_at_start)
+                .map(|(a, b)| (a - b).norm())
+                .fold(0.0, f64::max);
+            if moved <= config.settled_joint_motion {
+                // Settled at a τ still annealing: the final τ from the next iteration on.
+                anneal_cut = Some(iterations);
+            }
         }
     }
     let PointLabels {
@@ -1461,6 +1512,7 @@ fn run_hard_em(
         energy_trace: trace,
         iterations,
         termination,
+        anneal_cut,
         part_counts,
         outliers,
     };

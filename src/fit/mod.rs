@@ -169,6 +169,8 @@ pub struct FitResult {
     pub energy_trace: Vec<f64>,
     pub iterations: usize,
     pub termination: EmTermination,
+    /// Where the EM cut its annealing short ([`EmResult::anneal_cut`]).
+    pub anneal_cut: Option<usize>,
     /// Points labelled with each segment.
     pub part_counts: [usize; NUM_SEGMENTS],
     /// Foreground points labelled outlier.
@@ -186,6 +188,7 @@ impl FitResult {
             energy_trace: em.energy_trace,
             iterations: em.iterations,
             termination: em.termination,
+            anneal_cut: em.anneal_cut,
             part_counts: em.part_counts,
             outliers: em.outliers,
         }
@@ -342,6 +345,7 @@ impl FitProblem {
             .map(|(labels, r)| EmResume {
                 labels,
                 iterations: r.iterations,
+                anneal_cut: r.anneal_cut,
             });
         // A fresh fit also starts from `init` moved onto the observed body, and with its
         // limbs swapped if asked (see [`start`]); the EMs run in parallel and the first
@@ -471,6 +475,7 @@ impl FitProblem {
             energy_trace: result.energy_trace.clone(),
             iterations: result.iterations,
             termination: result.termination,
+            anneal_cut: result.anneal_cut,
             part_counts: result.part_counts,
             outliers: result.outliers,
         };
@@ -508,7 +513,7 @@ impl FitProblem {
                 }
             })
             .collect();
-        let tau = config.em.outlier_distance_at(em.iterations);
+        let tau = config.em.outlier_distance_in(em.iterations, em.anneal_cut);
         // One expansion cycle: the start is already the sub-sampled EM's labelling.
         let final_em = EmConfig {
             expansion_cycles: 1,
@@ -544,6 +549,7 @@ impl FitProblem {
                 Some(EmResume {
                     labels: &labels,
                     iterations: em.iterations,
+                    anneal_cut: em.anneal_cut,
                 }),
                 prior,
                 free_space,

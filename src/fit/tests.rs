@@ -384,6 +384,54 @@ fn resumed_fit_equals_the_longer_fit() {
     assert!(matches!(err, Err(Error::InvalidArgument { ref name, .. }) if name == "resume"));
 }
 
+/// Adaptive annealing: a fit that settles while τ anneals takes the final τ at once and
+/// stops sooner, at the same pose within a millimetre (the truth's here), its energy
+/// trace non-increasing; without the cut it anneals to the end. A fit stopped at its
+/// cut, continued, is the uninterrupted fit.
+#[test]
+fn a_settled_fit_cuts_its_annealing_and_resumes_after_the_cut() {
+    let model = BodyModel::default();
+    let cam = Camera::itop();
+    let truth = natural_pose();
+    let (depth, _) = model.render_depth(&truth, &cam);
+    let init = perturbed(&truth, 3, 10f64.to_radians(), 0.05);
+    let config = |adaptive_anneal, max_iterations| {
+        let mut c = FitConfig::default();
+        c.em.adaptive_anneal = adaptive_anneal;
+        c.em.max_iterations = max_iterations;
+        c
+    };
+    let fit = |c: &FitConfig| fit_pose(&depth, &cam, &init, &model, None, None, c).unwrap();
+    let cut = fit(&config(true, 20));
+    let full = fit(&config(false, 20));
+    let anneal = FitConfig::default().em.anneal_iterations;
+    let k = cut
+        .anneal_cut
+        .expect("the fit settles before τ has annealed");
+    assert!(k + 1 < anneal, "cut after iteration {k}");
+    assert_eq!(cut.termination, EmTermination::Converged);
+    assert!(cut.iterations < full.iterations);
+    assert!(full.iterations >= anneal);
+    assert_eq!(full.anneal_cut, None);
+    for r in [&cut, &full] {
+        assert!(r.energy_trace.windows(2).all(|w| w[1] <= w[0]));
+        assert!(joint_errors(&model, &r.pose, &truth).0 < 0.002);
+    }
+    assert!(joint_errors(&model, &cut.pose, &full.pose).1 < 0.001);
+    // Stopped at the cut (the final τ decided, not used yet), then continued.
+    let problem = FitProblem::new(&depth, &cam, None, &config(true, 20)).unwrap();
+    let brief = fit(&config(true, k));
+    assert_eq!((brief.iterations, brief.anneal_cut), (k, Some(k)));
+    let resumed = problem
+        .fit_from(&model, &brief.pose, Some(&brief), None)
+        .unwrap();
+    assert_eq!(resumed.pose, cut.pose);
+    assert_eq!(resumed.labels, cut.labels);
+    assert_eq!(resumed.energy, cut.energy);
+    assert_eq!(resumed.iterations, cut.iterations);
+    assert_eq!(resumed.anneal_cut, Some(k));
+}
+
 /// Coarse to fine: the full-resolution iterations continue the strided fit from its
 /// pose and full-resolution labelling, so their energy starts at the strided result's
 /// and never rises; they stop within their budget, label every pixel, and a brief

@@ -29,6 +29,8 @@ pub struct PyFitConfig {
     outlier_distance: f64,
     outlier_distance_start: f64,
     anneal_iterations: usize,
+    adaptive_anneal: bool,
+    settled_joint_motion: f64,
     truncation_factor: f64,
     max_iterations: usize,
     label_change_tolerance: f64,
@@ -69,6 +71,8 @@ impl PyFitConfig {
             outlier_distance: self.outlier_distance,
             outlier_distance_start: self.outlier_distance_start,
             anneal_iterations: self.anneal_iterations,
+            adaptive_anneal: self.adaptive_anneal,
+            settled_joint_motion: self.settled_joint_motion,
             truncation_factor: self.truncation_factor,
             max_iterations: self.max_iterations,
             label_change_tolerance: self.label_change_tolerance,
@@ -117,7 +121,8 @@ impl PyFitConfig {
     #[new]
     #[pyo3(signature = (*, sigma=None, loss="squared", loss_scale=DEFAULT_LOSS_SCALE, potts=None,
         contrast_weight=None, contrast_sigma=None, outlier_distance=None,
-        outlier_distance_start=None, anneal_iterations=None, truncation_factor=None,
+        outlier_distance_start=None, anneal_iterations=None, adaptive_anneal=None,
+        settled_joint_motion=None, truncation_factor=None,
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
         expansion_cycles=None, free_space_weight=None, free_space_margin=None,
         free_space_truncation=None, lm_max_iterations=None, connectivity=4, stride=1,
@@ -134,6 +139,8 @@ impl PyFitConfig {
         outlier_distance: Option<f64>,
         outlier_distance_start: Option<f64>,
         anneal_iterations: Option<i128>,
+        adaptive_anneal: Option<bool>,
+        settled_joint_motion: Option<f64>,
         truncation_factor: Option<f64>,
         max_iterations: Option<i128>,
         label_change_tolerance: Option<f64>,
@@ -164,6 +171,8 @@ impl PyFitConfig {
             outlier_distance: outlier_distance.unwrap_or(d.outlier_distance),
             outlier_distance_start: outlier_distance_start.unwrap_or(d.outlier_distance_start),
             anneal_iterations: count(anneal_iterations, d.anneal_iterations, "anneal_iterations")?,
+            adaptive_anneal: adaptive_anneal.unwrap_or(d.adaptive_anneal),
+            settled_joint_motion: settled_joint_motion.unwrap_or(d.settled_joint_motion),
             truncation_factor: truncation_factor.unwrap_or(d.truncation_factor),
             max_iterations: count(max_iterations, d.max_iterations, "max_iterations")?,
             label_change_tolerance: label_change_tolerance.unwrap_or(d.label_change_tolerance),
@@ -259,6 +268,13 @@ impl PyFitResult {
     #[getter]
     fn reason(&self) -> &'static str {
         self.result.termination.name()
+    }
+    /// The iteration after which the outlier distance jumped to its final value (the
+    /// EM had converged while it was still annealing; `FitConfig.adaptive_anneal`), or
+    /// None.
+    #[getter]
+    fn anneal_cut(&self) -> Option<usize> {
+        self.result.anneal_cut
     }
     /// Points per part, keyed by part name.
     #[getter]
