@@ -203,13 +203,20 @@ impl EmConfig {
         self.lm.validate()
     }
 
-    /// τ of iteration `it`'s E-step (0: the initial one) in a run whose annealing was
-    /// cut after iteration `cut` ([`EmResult::anneal_cut`]): the final value after the
-    /// cut, else [`Self::outlier_distance_at`].
+    /// Whether iteration `it`'s E-step (0: the initial one) has the final τ in a run
+    /// whose annealing was cut after iteration `cut` ([`EmResult::anneal_cut`]).
+    pub fn annealed_in(&self, it: usize, cut: Option<usize>) -> bool {
+        it >= self.anneal_iterations || cut.is_some_and(|k| k < it)
+    }
+
+    /// τ of iteration `it`'s E-step in a run whose annealing was cut after iteration
+    /// `cut`: the final value once [`Self::annealed_in`], else
+    /// [`Self::outlier_distance_at`].
     pub fn outlier_distance_in(&self, it: usize, cut: Option<usize>) -> f64 {
-        match cut {
-            Some(k) if k < it => self.outlier_distance,
-            _ => self.outlier_distance_at(it),
+        if self.annealed_in(it, cut) {
+            self.outlier_distance
+        } else {
+            self.outlier_distance_at(it)
         }
     }
 
@@ -1359,7 +1366,7 @@ fn run_hard_em(
     while iterations < config.max_iterations {
         iterations += 1;
         let energy_at_start = energy;
-        let joints_at_start = model.joints(&pose);
+        let pose_at_start = pose;
         // M-step (the objective was built for the first one).
         let (new_pose, report) = match next_m_step.take() {
             Some(done) => done,
@@ -1469,9 +1476,7 @@ fn run_hard_em(
         ahead.used += usize::from(next_m_step.is_some());
         last_changed = Some(changed);
         trace.push(energy);
-        // Whether this iteration's E-step had the final τ.
-        let annealed =
-            iterations >= config.anneal_iterations || anneal_cut.is_some_and(|k| k < iterations);
+        let annealed = config.annealed_in(iterations, anneal_cut);
         if changed == 0 && !pose_moved {
             termination = EmTermination::Stationary;
             break;
@@ -1491,7 +1496,7 @@ fn run_hard_em(
             let moved = model
                 .joints(&pose)
                 .iter()
-                .zip(&joints_at_start)
+                .zip(&model.joints(&pose_at_start))
                 .map(|(a, b)| (a - b).norm())
                 .fold(0.0, f64::max);
             if moved <= config.settled_joint_motion {

@@ -270,8 +270,8 @@ impl PyFitResult {
         self.result.termination.name()
     }
     /// The iteration after which the outlier distance jumped to its final value (the
-    /// EM had converged while it was still annealing; `FitConfig.adaptive_anneal`), or
-    /// None.
+    /// fit's labels and joints had settled while it was still annealing;
+    /// `FitConfig.adaptive_anneal`), or None.
     #[getter]
     fn anneal_cut(&self) -> Option<usize> {
         self.result.anneal_cut
