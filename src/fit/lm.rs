@@ -698,13 +698,14 @@ mod tests {
         };
         let mut pose = BodyModel::neutral_pose();
         pose[0] = c + 3.0;
+        let start_cost = 0.5 * 3.0f64.atan().powi(2);
         let report = lm.minimize(&mut objective, &mut pose);
         assert!(report.termination.converged(), "{report:?}");
         assert!((pose[0] - c).abs() < 1e-5, "ended at {}", pose[0]);
         // Replay the trials: the kept pose's cost never rises, and after a rejected
         // trial the next one lies within 0.9 of its distance (one parameter: the
         // scaled length is the distance times a constant).
-        let (mut at, mut cost) = (c + 3.0, 0.5 * 3.0f64.atan().powi(2));
+        let (mut at, mut cost) = (c + 3.0, start_cost);
         let mut rejected = 0;
         let mut last_rejected: Option<f64> = None;
         for &(x, trial_cost) in &objective.trials {
@@ -728,7 +729,7 @@ mod tests {
         let first_kept = objective
             .trials
             .iter()
-            .position(|&(_, cost)| cost < 0.5 * 3.0f64.atan().powi(2))
+            .position(|&(_, cost)| cost < start_cost)
             .unwrap();
         assert_eq!(first_kept + 1, 3, "{:?}", objective.trials);
     }
