@@ -24,7 +24,7 @@
 //! full energy is evaluated after every step and a step that would raise it is undone.
 
 use super::free_space::{FreeSpaceCost, FreeSpaceImage, FreeSpaceTerm};
-use super::lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, WithPrior};
+use super::lm::{LevenbergMarquardt, LmConfig, LmReport, PoseObjective, PosePrior, WithPrior};
 use super::objective::{Loss, PointCost, PointObjective, CHUNK_POINTS};
 use crate::body::residuals::{to_f64, PoseGeometry};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
@@ -1192,6 +1192,11 @@ fn m_step_ahead(
     abandon: &AtomicBool,
 ) -> Option<(Pose, LmReport)> {
     objective.relabel(labels, point_cost);
+    // The distances at the start even if abandoned: the M-step that is used starts
+    // here too, with mostly the same labels, and takes them from here (see
+    // `PointObjective`), so this is work off its path on the thread the E-step's cycle
+    // leaves idle.
+    objective.cost(start);
     let mut pose = *start;
     let mut with_prior = WithPrior {
         objective,
@@ -1280,7 +1285,7 @@ fn run_hard_em(
     };
     let free_space = free_space_term();
     // The same term for an M-step run beside an E-step (see below): the term keeps its
-    // last cost in a cell, which one thread at a time may use.
+    // last cost, which each of two M-steps running at once should have to itself.
     let mut free_space_ahead = free_space_term();
     let n = points.len();
     if n == 0 {

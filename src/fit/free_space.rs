@@ -32,6 +32,7 @@ use super::objective::{accumulate_row, add_segment_moments, mirror_upper, SYM6};
 use crate::body::residuals::PoseGeometry;
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::camera::Camera;
+use std::sync::Mutex;
 
 /// Surface samples per segment.
 pub const SAMPLES_PER_SEGMENT: usize = 64;
@@ -81,7 +82,17 @@ pub struct FreeSpaceTerm<'a> {
     directions: [[f64; 3]; SAMPLES_PER_SEGMENT],
     /// The last pose whose cost was computed, and that cost: LM asks for the cost of a
     /// trial pose and then, if it accepts it, for the system there; the EM asks again.
-    last: std::cell::Cell<Option<(Pose, f64)>>,
+    /// (A lock, not a cell, so that the term can be evaluated beside the data term.)
+    last: Mutex<Option<(Pose, f64)>>,
+}
+
+/// The term's share of the Gauss–Newton system at one pose before it is added (see
+/// [`FreeSpaceTerm::system`]).
+pub struct FreeSpaceSystem {
+    geo: PoseGeometry,
+    /// Per segment with a weighted sample: the moments Σ w q qᵀ (packed) and Σ w r q.
+    sums: [Option<([f64; SYM6], [f64; 6])>; NUM_SEGMENTS],
+    cost: f64,
 }
 
 /// ∂r/∂p of a sample in free space is (0, 0, −1); the moment rows use n = −∂r/∂p.
@@ -103,7 +114,7 @@ impl<'a> FreeSpaceTerm<'a> {
             camera: *camera,
             cost,
             directions: sample_directions(),
-            last: std::cell::Cell::new(None),
+            last: Mutex::new(None),
         }
     }
 
@@ -170,14 +181,22 @@ impl<'a> FreeSpaceTerm<'a> {
         if !self.active() {
             return 0.0;
         }
-        if let Some((p, c)) = self.last.get() {
+        if let Some((p, c)) = self.last() {
             if p == *pose {
                 return c;
             }
         }
         let c = self.cost_at(&PoseGeometry::new(self.model, pose));
-        self.last.set(Some((*pose, c)));
+        self.remember(pose, c);
         c
+    }
+
+    fn last(&self) -> Option<(Pose, f64)> {
+        *self.last.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    fn remember(&self, pose: &Pose, cost: f64) {
+        *self.last.lock().unwrap_or_else(|e| e.into_inner()) = Some((*pose, cost));
     }
 
     /// Adds the term's Gauss–Newton system at `pose` to `h` (both triangles) and `g`;
@@ -186,33 +205,62 @@ impl<'a> FreeSpaceTerm<'a> {
         if !self.active() {
             return 0.0;
         }
+        let system = self.system(pose);
+        self.add_system(pose, &system, h, g)
+    }
+
+    /// The part of [`Self::add_to`] that reads the depth image (the samples' residuals
+    /// and moments), which the M-step runs beside the data term's normal equations.
+    pub fn system(&self, pose: &Pose) -> FreeSpaceSystem {
         let geo = PoseGeometry::new(self.model, pose);
-        let mut hs = [0.0; NN];
-        let mut total = 0.0;
-        for k in 0..NUM_SEGMENTS {
-            let e = &geo.segments[k];
-            let (mut qq, mut qr) = ([0.0; SYM6], [0.0; 6]);
-            let mut any = false;
-            for u in &self.directions {
-                let p = e.surface_point(u);
-                let r = self.residual(&p);
-                let (c, w) = self.cost_and_weight(r);
-                total += c;
-                if w > 0.0 {
-                    accumulate_row(&p, &TOWARDS_CAMERA, r, w, &mut qq, &mut qr);
-                    any = true;
+        let mut sums = [None; NUM_SEGMENTS];
+        let mut cost = 0.0;
+        if self.active() {
+            for (e, sum) in geo.segments.iter().zip(&mut sums) {
+                let (mut qq, mut qr) = ([0.0; SYM6], [0.0; 6]);
+                let mut any = false;
+                for u in &self.directions {
+                    let p = e.surface_point(u);
+                    let r = self.residual(&p);
+                    let (c, w) = self.cost_and_weight(r);
+                    cost += c;
+                    if w > 0.0 {
+                        accumulate_row(&p, &TOWARDS_CAMERA, r, w, &mut qq, &mut qr);
+                        any = true;
+                    }
+                }
+                if any {
+                    *sum = Some((qq, qr));
                 }
             }
-            if any {
-                add_segment_moments(&geo, k, &qq, &qr, &mut hs, g);
+        }
+        FreeSpaceSystem { geo, sums, cost }
+    }
+
+    /// Adds `system` (from [`Self::system`] at `pose`) to `h` (both triangles) and `g`
+    /// as [`Self::add_to`] does; returns its cost.
+    pub fn add_system(
+        &self,
+        pose: &Pose,
+        system: &FreeSpaceSystem,
+        h: &mut [f64; NN],
+        g: &mut [f64; N],
+    ) -> f64 {
+        if !self.active() {
+            return 0.0;
+        }
+        let mut hs = [0.0; NN];
+        for (k, sum) in system.sums.iter().enumerate() {
+            if let Some((qq, qr)) = sum {
+                add_segment_moments(&system.geo, k, qq, qr, &mut hs, g);
             }
         }
         mirror_upper(&mut hs);
         for (o, v) in h.iter_mut().zip(&hs) {
             *o += v;
         }
-        self.last.set(Some((*pose, total)));
-        total
+        self.remember(pose, system.cost);
+        system.cost
     }
 }
 
@@ -297,6 +345,59 @@ mod tests {
                 assert_eq!(h[i * N + j], h[j * N + i]);
             }
         }
+    }
+
+    /// `WithPrior` evaluates the term beside the data term and adds it after it: its
+    /// cost and normal equations equal the terms added one after the other (data, prior,
+    /// free space) bit for bit, at a pose where both the data and the free-space term
+    /// have weighted residuals.
+    #[test]
+    fn the_term_beside_the_data_term_adds_up_as_one_after_the_other() {
+        use crate::fit::lm::{PoseObjective, PosePrior, WithPrior};
+        use crate::fit::objective::{Loss, PointCost, PointObjective};
+        let model = BodyModel::default();
+        let cam = camera();
+        let pose = pose_for_tests(5);
+        let other = pose_for_tests(3);
+        // A wall through the body: the front half of the samples in free space.
+        let depth = vec![pose[2] as f32; cam.width * cam.height];
+        let t = term(&model, &depth, 0.7);
+        let joints = model.joints(&pose);
+        let points: Vec<[f32; 3]> = (0..3000)
+            .map(|i| {
+                let j = joints[i % joints.len()];
+                let o = 0.01 * (i % 13) as f64;
+                [(j.x + o) as f32, (j.y - o) as f32, (j.z + 0.5 * o) as f32]
+            })
+            .collect();
+        let labels: Vec<i32> = (0..points.len())
+            .map(|i| (i % NUM_SEGMENTS) as i32)
+            .collect();
+        let pc = PointCost {
+            sigma: 0.02,
+            loss: Loss::Huber(0.03),
+            truncation: 0.2,
+        };
+        let prior = PosePrior::uniform(other, 30.0, 3.0);
+        let mut data = PointObjective::new(&model, &points, &labels, pc);
+        let (mut h1, mut g1) = ([0.0; NN], [0.0; N]);
+        let c1 = data.normal_equations(&pose, &mut h1, &mut g1)
+            + prior.add_to(&pose, &mut h1, &mut g1)
+            + t.add_to(&pose, &mut h1, &mut g1);
+        let cost1 = data.cost(&other) + prior.cost(&other) + t.cost(&other);
+        assert!(t.cost(&pose) > 0.0 && g1.iter().any(|&v| v != 0.0));
+
+        let t2 = term(&model, &depth, 0.7);
+        let mut data2 = PointObjective::new(&model, &points, &labels, pc);
+        let mut both = WithPrior {
+            objective: &mut data2,
+            prior: Some(&prior),
+            free_space: Some(&t2),
+        };
+        let (mut h2, mut g2) = ([0.0; NN], [0.0; N]);
+        assert_eq!(both.normal_equations(&pose, &mut h2, &mut g2), c1);
+        assert_eq!((h2, g2), (h1, g1));
+        assert_eq!(both.cost(&other), cost1);
     }
 
     /// The outcome the term exists for: model surface seen in front of the observed

@@ -10,6 +10,7 @@
 //! have grown to the cloud size.
 
 use super::lm::{PoseObjective, N, NN};
+use crate::body::ellipsoid::SortedPlacement;
 use crate::body::residuals::{cross, group_by_segment, PoseGeometry, MAX_SEGMENT_DOFS};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use rayon::prelude::*;
@@ -183,6 +184,90 @@ pub struct PointObjective<'a> {
     partial_costs: Vec<f64>,
     evaluated: Option<Pose>,
     chunks: Vec<Accumulator>,
+    /// Per entry of `order` in the last evaluation: whether its distance was computed
+    /// there (not taken from `start`).
+    computed: Vec<bool>,
+    /// The evaluation the last `relabel` replaced (an M-step's last pose, usually).
+    replaced: Evaluation,
+    /// Distances at an M-step's start pose, by point (see [`StartDistances`]).
+    start: StartDistances,
+    /// Set by `relabel` with new labels: the next evaluation is an M-step's start.
+    starting: bool,
+}
+
+/// One evaluation's entries in `order`'s layout, and where it was made.
+#[derive(Default)]
+struct Evaluation {
+    order: Vec<u32>,
+    segment: Vec<u8>,
+    distance: Vec<f64>,
+    normal: Vec<[f64; 3]>,
+    pose: Option<Pose>,
+    /// The truncation an infinite distance is known to pass.
+    truncation: f64,
+}
+
+/// Each point's signed distance and normal at one pose, for the segment it had when
+/// they were computed. An EM's M-step starts at the pose the one before it ended at
+/// (its evaluation is `relabel`'s `replaced`), and the M-steps run ahead beside an
+/// E-step's cycles all start at the same pose, each with labels that mostly did not
+/// change: their first evaluation computes only the points whose segment is new.
+/// Taken values are the computed ones bit for bit, so results do not change.
+#[derive(Default)]
+struct StartDistances {
+    pose: Option<Pose>,
+    /// An infinite distance is known to pass this truncation (the smallest of those in
+    /// force where the entries were computed).
+    truncation: f64,
+    /// Per point; [`NO_SEGMENT`] where nothing is known.
+    segment: Vec<u8>,
+    distance: Vec<f64>,
+    normal: Vec<[f64; 3]>,
+}
+
+const NO_SEGMENT: u8 = u8::MAX;
+
+impl StartDistances {
+    /// Forgets every entry and starts over at `pose`.
+    fn reset(&mut self, pose: &Pose, truncation: f64, n: usize) {
+        self.pose = Some(*pose);
+        self.truncation = truncation;
+        self.segment.clear();
+        self.segment.resize(n, NO_SEGMENT);
+        self.distance.resize(n, 0.0);
+        self.normal.resize(n, [0.0; 3]);
+    }
+
+    /// The entry of point `i` for segment `k` where it can stand for a new evaluation
+    /// under `truncation`: a finite distance always, an infinite one only if it passes
+    /// this truncation too.
+    #[inline]
+    fn known(&self, i: usize, k: usize, truncation: f64) -> Option<(f64, [f64; 3])> {
+        let d = self.distance[i];
+        (self.segment[i] == k as u8 && (d.is_finite() || truncation <= self.truncation))
+            .then(|| (d, self.normal[i]))
+    }
+
+    /// Records the entries of `order` (those with `keep`) at the kept pose.
+    fn record(
+        &mut self,
+        truncation: f64,
+        order: &[u32],
+        segment: &[u8],
+        distance: &[f64],
+        normal: &[[f64; 3]],
+        keep: impl Fn(usize) -> bool,
+    ) {
+        self.truncation = self.truncation.min(truncation);
+        for (r, &i) in order.iter().enumerate() {
+            if keep(r) {
+                let i = i as usize;
+                self.segment[i] = segment[r];
+                self.distance[i] = distance[r];
+                self.normal[i] = normal[r];
+            }
+        }
+    }
 }
 
 impl<'a> PointObjective<'a> {
@@ -206,6 +291,10 @@ impl<'a> PointObjective<'a> {
             partial_costs: Vec::new(),
             evaluated: None,
             chunks: Vec::new(),
+            computed: Vec::new(),
+            replaced: Evaluation::default(),
+            start: StartDistances::default(),
+            starting: false,
         };
         objective.relabel(labels, point_cost);
         objective
@@ -235,6 +324,18 @@ impl<'a> PointObjective<'a> {
             }
             return;
         }
+        if self.evaluated.is_some() {
+            // Kept for the next evaluation (see `StartDistances`); its buffers take
+            // the replaced one's.
+            let r = &mut self.replaced;
+            std::mem::swap(&mut self.order, &mut r.order);
+            std::mem::swap(&mut self.segment, &mut r.segment);
+            std::mem::swap(&mut self.distance, &mut r.distance);
+            std::mem::swap(&mut self.normal, &mut r.normal);
+            r.pose = self.evaluated;
+            r.truncation = self.point_cost.truncation;
+        }
+        self.starting = true;
         self.labels.clear();
         self.labels.extend_from_slice(labels);
         self.order.resize(labels.len(), 0);
@@ -248,6 +349,7 @@ impl<'a> PointObjective<'a> {
         let n_chunks = m.div_ceil(CHUNK_POINTS);
         self.distance.resize(m, 0.0);
         self.normal.resize(m, [0.0; 3]);
+        self.computed.resize(m, true);
         self.partial_costs.resize(n_chunks, 0.0);
         self.chunks.resize_with(n_chunks, Accumulator::default);
         self.point_cost = point_cost;
@@ -279,38 +381,104 @@ impl<'a> PointObjective<'a> {
     /// Distances, normals and chunk costs at `pose` with its geometry `geo` (kept until
     /// another pose comes).
     fn evaluate(&mut self, pose: &Pose, geo: &PoseGeometry) {
-        let (points, pc) = (self.points, self.point_cost);
+        let (points, pc, n) = (self.points, self.point_cost, self.points.len());
+        let replaced = &mut self.replaced;
+        if replaced.pose.as_ref() == Some(pose) {
+            // The last M-step ended here: its entries join the start pose's.
+            if self.start.pose.as_ref() != Some(pose) {
+                self.start.reset(pose, replaced.truncation, n);
+            }
+            let r = &*replaced;
+            self.start.record(
+                r.truncation,
+                &r.order,
+                &r.segment,
+                &r.distance,
+                &r.normal,
+                |_| true,
+            );
+            replaced.pose = None;
+        }
+        let reuse = self.start.pose.as_ref() == Some(pose);
+        let start = &self.start;
         self.order
             .par_chunks(CHUNK_POINTS)
             .zip(self.segment.par_chunks(CHUNK_POINTS))
             .zip(self.distance.par_chunks_mut(CHUNK_POINTS))
             .zip(self.normal.par_chunks_mut(CHUNK_POINTS))
+            .zip(self.computed.par_chunks_mut(CHUNK_POINTS))
             .zip(self.partial_costs.par_iter_mut())
-            .for_each(|((((idx, seg), dist), normal), cost)| {
+            .for_each(|(((((idx, seg), dist), normal), computed), cost)| {
                 let mut near_buf = [(0usize, [0.0f64; 3]); CHUNK_POINTS];
                 for (k, run) in segment_runs(seg) {
                     let e = &geo.segments[k];
-                    let items = run.map(|r| (r, vec3(&points[idx[r] as usize])));
-                    // Truncated for sure: constant cost, zero weight.
-                    let near = e.split_near(
-                        pc.truncation,
-                        items,
-                        |r| dist[r] = f64::INFINITY,
-                        &mut near_buf,
-                    );
-                    e.distances_and_normals_batched(near.iter().copied(), |r, d, n| {
-                        dist[r] = d;
-                        normal[r] = n;
-                    });
+                    let point = |r: usize| (r, vec3(&points[idx[r] as usize]));
+                    if reuse {
+                        let mut taken = [false; CHUNK_POINTS];
+                        for r in run.clone() {
+                            if let Some(known) = start.known(idx[r] as usize, k, pc.truncation) {
+                                taken[r] = true;
+                                (dist[r], normal[r]) = known;
+                            }
+                        }
+                        let items = run.clone().filter(|&r| !taken[r]).map(point);
+                        distances_into(e, pc.truncation, items, dist, normal, &mut near_buf);
+                        for r in run {
+                            computed[r] = !taken[r];
+                        }
+                    } else {
+                        let items = run.clone().map(point);
+                        distances_into(e, pc.truncation, items, dist, normal, &mut near_buf);
+                        computed[run].fill(true);
+                    }
                 }
                 *cost = chunk_cost(dist, &pc);
             });
+        if self.starting || reuse {
+            if !reuse {
+                self.start.reset(pose, pc.truncation, n);
+            }
+            let computed = &self.computed;
+            self.start.record(
+                pc.truncation,
+                &self.order,
+                &self.segment,
+                &self.distance,
+                &self.normal,
+                |r| computed[r],
+            );
+        }
+        self.starting = false;
         self.evaluated = Some(*pose);
+    }
+
+    /// Entries of the last evaluation whose distance was computed there (the others
+    /// were known at its pose; see [`StartDistances`]).
+    pub fn distances_computed(&self) -> usize {
+        self.computed.iter().filter(|&&c| c).count()
     }
 
     fn total_cost(&self) -> f64 {
         self.partial_costs.iter().sum()
     }
+}
+
+/// The signed distances and normals of `items` (entries of a chunk with their points)
+/// to `e` into `dist` and `normal`; an entry certainly beyond `truncation` gets an
+/// infinite distance (constant cost, zero weight) and no normal.
+fn distances_into(
+    e: &SortedPlacement,
+    truncation: f64,
+    items: impl Iterator<Item = (usize, [f64; 3])>,
+    dist: &mut [f64],
+    normal: &mut [[f64; 3]],
+    near_buf: &mut [(usize, [f64; 3])],
+) {
+    let near = e.split_near(truncation, items, |r| dist[r] = f64::INFINITY, near_buf);
+    e.distances_and_normals_batched(near.iter().copied(), |r, d, n| {
+        dist[r] = d;
+        normal[r] = n;
+    });
 }
 
 /// Σ cost over one chunk's distances, in order (the kept chunk costs; `relabel`
@@ -679,6 +847,76 @@ mod tests {
             }
             assert_eq!(system(&mut reused), system(&mut fresh));
         }
+    }
+
+    /// An M-step's first evaluation at a pose where distances are known — from the
+    /// evaluation `relabel` replaced, and from earlier starts there, also after
+    /// evaluations elsewhere in between (an M-step abandoned part-way) — computes only
+    /// the points whose segment is new there, plus those known only as "beyond a
+    /// smaller truncation" when the truncation grows; its cost and normal equations
+    /// equal a fresh objective's bit for bit at every step.
+    #[test]
+    fn a_start_evaluation_computes_only_the_points_with_new_segments() {
+        let model = BodyModel::default();
+        let (pose, elsewhere) = (pose_for_tests(4), pose_for_tests(7));
+        let (pts, la) = scattered(&model, &pose, 3000);
+        let labelled = |l: i32| (0..NUM_SEGMENTS as i32).contains(&l);
+        let lb: Vec<i32> = la
+            .iter()
+            .enumerate()
+            .map(|(i, &l)| match i {
+                _ if i % 11 == 0 => -1,
+                _ if i % 5 == 0 && labelled(l) => (l + 3) % NUM_SEGMENTS as i32,
+                _ => l,
+            })
+            .collect();
+        // Points labelled in both with another segment in `lb`.
+        let moved = (0..pts.len())
+            .filter(|&i| labelled(la[i]) && labelled(lb[i]) && la[i] != lb[i])
+            .count();
+        assert!(moved > 200, "{moved}");
+        let pc = |t: f64| PointCost {
+            sigma: 0.02,
+            loss: Loss::Cauchy(0.05),
+            truncation: t,
+        };
+        let system = |obj: &mut PointObjective, at: &Pose| {
+            let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+            let c = obj.normal_equations(at, &mut h, &mut g);
+            (c, h, g)
+        };
+        let fresh = |labels: &[i32], t: f64, at: &Pose| {
+            system(&mut PointObjective::new(&model, &pts, labels, pc(t)), at)
+        };
+        let all = |labels: &[i32]| labels.iter().filter(|&&l| labelled(l)).count();
+
+        let mut obj = PointObjective::new(&model, &pts, &la, pc(0.2));
+        assert_eq!(system(&mut obj, &pose), fresh(&la, 0.2, &pose));
+        assert_eq!(obj.distances_computed(), all(&la));
+        // A trial elsewhere: nothing known there.
+        assert_eq!(obj.cost(&elsewhere), fresh(&la, 0.2, &elsewhere).0);
+        assert_eq!(obj.distances_computed(), all(&la));
+        // New labels at the first pose (the last evaluation was elsewhere): the first
+        // start's distances serve.
+        obj.relabel(&lb, pc(0.15));
+        assert_eq!(system(&mut obj, &pose), fresh(&lb, 0.15, &pose));
+        assert_eq!(obj.distances_computed(), moved);
+        // Back to the first labels: the points `lb` moved are known for their `lb`
+        // segment only; those `lb` left unlabelled are still known from the first start.
+        obj.relabel(&la, pc(0.15));
+        assert_eq!(system(&mut obj, &pose), fresh(&la, 0.15, &pose));
+        assert_eq!(obj.distances_computed(), moved);
+        // A larger truncation: distances known only to pass 0.15 are computed again.
+        let beyond = (0..pts.len())
+            .filter(|&i| labelled(lb[i]) && lb[i] == la[i] && obj.start.distance[i].is_infinite())
+            .count();
+        assert!(beyond > 0);
+        obj.relabel(&lb, pc(0.3));
+        assert_eq!(system(&mut obj, &pose), fresh(&lb, 0.3, &pose));
+        assert_eq!(obj.distances_computed(), moved + beyond);
+        // Trials elsewhere and back, as LM makes them, stay exact.
+        assert_eq!(obj.cost(&elsewhere), fresh(&lb, 0.3, &elsewhere).0);
+        assert_eq!(system(&mut obj, &pose), fresh(&lb, 0.3, &pose));
     }
 
     /// `kept_distances` gives each labelled point's distance to its segment at the
