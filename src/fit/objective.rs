@@ -379,11 +379,13 @@ impl<'a> PointObjective<'a> {
     }
 
     /// Distances, normals and chunk costs at `pose` with its geometry `geo` (kept until
-    /// another pose comes).
+    /// another pose comes). Only the first evaluation after new labels (an M-step's
+    /// start) takes known distances (see [`StartDistances`]); LM's trials never come
+    /// back to a start, and every other evaluation computes all of its own.
     fn evaluate(&mut self, pose: &Pose, geo: &PoseGeometry) {
         let (points, pc, n) = (self.points, self.point_cost, self.points.len());
         let replaced = &mut self.replaced;
-        if replaced.pose.as_ref() == Some(pose) {
+        if self.starting && replaced.pose.as_ref() == Some(pose) {
             // The last M-step ended here: its entries join the start pose's.
             if self.start.pose.as_ref() != Some(pose) {
                 self.start.reset(pose, replaced.truncation, n);
@@ -399,7 +401,7 @@ impl<'a> PointObjective<'a> {
             );
             replaced.pose = None;
         }
-        let reuse = self.start.pose.as_ref() == Some(pose);
+        let reuse = self.starting && self.start.pose.as_ref() == Some(pose);
         let start = &self.start;
         self.order
             .par_chunks(CHUNK_POINTS)
@@ -434,7 +436,7 @@ impl<'a> PointObjective<'a> {
                 }
                 *cost = chunk_cost(dist, &pc);
             });
-        if self.starting || reuse {
+        if self.starting {
             if !reuse {
                 self.start.reset(pose, pc.truncation, n);
             }
@@ -914,9 +916,12 @@ mod tests {
         obj.relabel(&lb, pc(0.3));
         assert_eq!(system(&mut obj, &pose), fresh(&lb, 0.3, &pose));
         assert_eq!(obj.distances_computed(), moved + beyond);
-        // Trials elsewhere and back, as LM makes them, stay exact.
+        // Trials elsewhere and back, as LM makes them, stay exact; past the start every
+        // evaluation computes all of its distances (also back at the start's pose).
         assert_eq!(obj.cost(&elsewhere), fresh(&lb, 0.3, &elsewhere).0);
+        assert_eq!(obj.distances_computed(), all(&lb));
         assert_eq!(system(&mut obj, &pose), fresh(&lb, 0.3, &pose));
+        assert_eq!(obj.distances_computed(), all(&lb));
     }
 
     /// `kept_distances` gives each labelled point's distance to its segment at the
