@@ -455,7 +455,7 @@ impl<'a> PointObjective<'a> {
     }
 
     /// Entries of the last evaluation whose distance was computed there (the others
-    /// were known at its pose; see [`StartDistances`]).
+    /// were known at its pose: an M-step's start, after new labels).
     pub fn distances_computed(&self) -> usize {
         self.computed.iter().filter(|&&c| c).count()
     }
