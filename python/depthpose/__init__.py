@@ -20,7 +20,15 @@ from ._core import (
     surface_normals,
 )
 from .body import BodyModel
-from .cloud import PointCloud, foreground_mask, point_cloud
+from .cloud import (
+    Cluster,
+    Plane,
+    PointCloud,
+    Segmentation,
+    foreground_mask,
+    point_cloud,
+    segment_person,
+)
 from .fit import (
     FitConfig,
     FitResult,
@@ -55,6 +63,10 @@ __all__ = [
     "InvalidInputError",
     "NoBodyError",
     "PointCloud",
+    "Cluster",
+    "Plane",
+    "Segmentation",
+    "segment_person",
     "TemplateDatabase",
     "__version__",
     "depth_to_points",

@@ -68,6 +68,7 @@ def foreground_mask(
     depth: npt.NDArray[np.generic],
     background: npt.NDArray[np.generic] | None = None,
     *,
+    camera: Camera | None = None,
     min_depth: float = 0.3,
     max_depth: float = 8.0,
     bg_tolerance: float = 0.025,
@@ -503,3 +504,60 @@ def stereo_match(
 def depth_from_disparity(
     disparity: np.ndarray, focal: float, baseline: float, doffs: float = 0.0
 ) -> npt.NDArray[np.float32]: ...
+
+# ---- person segmentation ------------------------------------------------------------
+class Plane:
+    """A support plane ``normal · X = offset`` (camera frame, metres, ``offset > 0``)."""
+
+    @property
+    def normal(self) -> list[float]: ...
+    @property
+    def offset(self) -> float: ...
+    @property
+    def inliers(self) -> int: ...
+    @property
+    def area(self) -> float: ...
+
+class Cluster:
+    """A depth-continuous cluster of pixels, measured in metres."""
+
+    @property
+    def pixels(self) -> int: ...
+    @property
+    def area(self) -> float: ...
+    @property
+    def height(self) -> float: ...
+    @property
+    def width(self) -> float: ...
+    @property
+    def centroid(self) -> list[float]: ...
+    @property
+    def median_depth(self) -> float: ...
+    @property
+    def bbox(self) -> list[int]: ...
+    @property
+    def person_like(self) -> bool: ...
+    @property
+    def score(self) -> float: ...
+
+class Segmentation:
+    """The person's pixels and how they were found (see ``depthpose.segment_person``)."""
+
+    @property
+    def mask(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def planes(self) -> list[Plane]: ...
+    @property
+    def person(self) -> Cluster: ...
+    @property
+    def others(self) -> list[Cluster]: ...
+
+def segment_person(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    background: npt.NDArray[np.generic] | None = None,
+    *,
+    previous: Segmentation | None = None,
+) -> Segmentation: ...

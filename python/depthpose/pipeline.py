@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from . import _core
 from ._core import Camera, DepthPoseError, InvalidInputError, NoBodyError
 from .cloud import foreground_mask
 
@@ -392,6 +393,8 @@ class PoseEstimator:
         self.config.validate()
         self.background = background
         self._templates = templates
+        #: The last frame's segmentation (None when a mask was given).
+        self.segmentation: Any = None
 
     @property
     def templates(self):
@@ -401,10 +404,18 @@ class PoseEstimator:
             self._templates = TemplateDatabase.default()
         return self._templates
 
-    def _mask(self, depth: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
+    def _mask(self, depth: np.ndarray, mask: np.ndarray | None, previous: Any = None) -> np.ndarray:
+        """The person's pixels: ``mask`` when given, else :func:`segment_person` (with
+        the estimator's background frame when it has one; ``previous``, a video's last
+        segmentation, follows the person). The segmentation is kept in
+        ``self.segmentation``."""
         if mask is not None:
+            self.segmentation = None
             return np.ascontiguousarray(mask, dtype=bool)
-        return foreground_mask(depth, self.background)
+        self.segmentation = _core.segment_person(
+            depth, self.camera, self.background, previous=previous
+        )
+        return self.segmentation.mask
 
     def _fit_config(self, iterations=None, stride=None, label_all_pixels=None):
         from .fit import FitConfig
@@ -662,6 +673,7 @@ class PoseTracker:
         on, the shape is calibrated again over the next frames."""
         self._prev: np.ndarray | None = None
         self._prev2: np.ndarray | None = None
+        self._segmentation: Any = None
         self._recent: list[float] = []
         self._since_check = 0
         self.lost_frames = 0
@@ -774,7 +786,7 @@ class PoseTracker:
             switched = True
         else:
             t = {"start": time.perf_counter()}
-            m = est._mask(depth, mask)
+            m = est._mask(depth, mask, previous=self._segmentation)
             t["foreground"] = time.perf_counter()
             pred = self._predict()
             fit = est._fit(
@@ -821,6 +833,7 @@ class PoseTracker:
                     self.lost_frames += 1
             mask = m
         self._frames += 1
+        self._segmentation = est.segmentation
         first = self._prev is None
         if switched:
             self.switches += self._prev is not None

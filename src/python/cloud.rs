@@ -3,10 +3,12 @@
 use super::arrays::{bool_array, count, depth_array, to_numpy};
 use super::camera::PyCamera;
 use super::native;
+use crate::camera::Camera;
 use crate::cloud::{
     foreground_mask as fg_mask, neighbour_graph, normals_from_depth, Cloud, DepthView,
     ForegroundConfig, NormalConfig,
 };
+use crate::segment::{segment_person, SegmentConfig};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
@@ -115,13 +117,15 @@ fn pixel_graph<'py>(
 
 /// The person's pixels (H, W) bool. See `depthpose.foreground_mask`.
 #[pyfunction]
-#[pyo3(signature = (depth, background=None, *, min_depth=0.3, max_depth=8.0, bg_tolerance=0.025,
-                    bg_tolerance_quadratic=0.003, max_step=0.25, min_component=40, large_share=0.3))]
+#[pyo3(signature = (depth, background=None, *, camera=None, min_depth=0.3, max_depth=8.0,
+                    bg_tolerance=0.025, bg_tolerance_quadratic=0.003, max_step=0.25,
+                    min_component=40, large_share=0.3))]
 #[allow(clippy::too_many_arguments)]
 fn foreground_mask<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
     background: Option<&Bound<'py, PyAny>>,
+    camera: Option<&PyCamera>,
     min_depth: f32,
     max_depth: f32,
     bg_tolerance: f32,
@@ -145,18 +149,26 @@ fn foreground_mask<'py>(
         large_share,
         ..Default::default()
     };
+    let (h, w) = (d.shape[0], d.shape[1]);
+    let camera = match camera {
+        Some(c) => c.inner,
+        None => Camera::nominal(w, h)?,
+    };
     let mask = native(py, || -> PyResult<Vec<bool>> {
-        let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
-        let bgv = match &bg {
-            Some(b) => Some(DepthView::new(
-                &b.data,
-                b.shape[0],
-                b.shape[1],
-                "background",
-            )?),
-            None => None,
-        };
-        Ok(fg_mask(&view, bgv.as_ref(), &cfg)?)
+        let view = DepthView::new(&d.data, h, w, "depth")?;
+        match &bg {
+            Some(b) => {
+                let bgv = DepthView::new(&b.data, b.shape[0], b.shape[1], "background")?;
+                Ok(fg_mask(&view, Some(&bgv), &cfg)?)
+            }
+            None => {
+                let config = SegmentConfig {
+                    foreground: cfg,
+                    ..Default::default()
+                };
+                Ok(segment_person(&view, &camera, None, &config, None)?.mask)
+            }
+        }
     })?;
     Ok(to_numpy(py, mask, &d.shape))
 }

@@ -13,6 +13,7 @@ mod cloud;
 mod fit;
 mod graphcut;
 mod io;
+mod segment;
 mod stereo;
 mod templates;
 
@@ -78,6 +79,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fit::register(m)?;
     graphcut::register(m)?;
     io::register(m)?;
+    segment::register(m)?;
     stereo::register(m)?;
     templates::register(m)?;
     Ok(())
