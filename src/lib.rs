@@ -42,6 +42,7 @@ pub mod error;
 pub mod fit;
 pub mod graphcut;
 pub mod io;
+pub mod pipeline;
 pub mod pool;
 pub mod render;
 pub mod segment;

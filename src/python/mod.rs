@@ -13,6 +13,7 @@ mod cloud;
 mod fit;
 mod graphcut;
 mod io;
+mod pipeline;
 mod segment;
 mod stereo;
 mod templates;
@@ -80,6 +81,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     graphcut::register(m)?;
     io::register(m)?;
     segment::register(m)?;
+    pipeline::register(m)?;
     stereo::register(m)?;
     templates::register(m)?;
     Ok(())

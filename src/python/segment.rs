@@ -44,6 +44,12 @@ impl PyPlane {
     }
 }
 
+impl From<Plane> for PyPlane {
+    fn from(inner: Plane) -> Self {
+        PyPlane { inner }
+    }
+}
+
 /// A depth-continuous cluster of pixels, measured in metres.
 #[pyclass(name = "Cluster", module = "depthpose._core", frozen)]
 #[derive(Clone)]
@@ -95,6 +101,12 @@ impl PyCluster {
             "Cluster(pixels={}, area={:.2}, height={:.2}, width={:.2}, depth={:.2})",
             c.pixels, c.area, c.height, c.width, c.median_depth
         )
+    }
+}
+
+impl From<Cluster> for PyCluster {
+    fn from(inner: Cluster) -> Self {
+        PyCluster { inner }
     }
 }
 
