@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     model = None if args.height is None else dp.BodyModel(height=args.height)
     calibrate = {"auto": None, "on": True, "off": False}[args.calibrate]
     rows = []
-    summary: dict = {"sequences": {}, "config": vars(config), "height": args.height,
+    summary: dict = {"sequences": {}, "config": {k: v if isinstance(v, (int, float, bool, type(None))) else repr(v) for k, v in config.as_dict().items()}, "height": args.height,
                      "calibrate": args.calibrate}  # fmt: skip
     for f in files:
         seq, depth, gt = _load(f, args.frames, args.start)
@@ -210,7 +210,20 @@ def main(argv: list[str] | None = None) -> int:
                                                 ("MPJPE", "PCK")], [row]).splitlines()[-1],
               flush=True)  # fmt: skip
 
-    overall = ["all", str(sum(int(r[1]) for r in rows))]
+    # Mean over sequences and the worst sequence (by PCK), per mode.
+    mean_row = ["mean over sequences", ""]
+    worst_row = ["worst sequence", ""]
+    for m in modes:
+        per = summary["sequences"]
+        mp = [per[name][m]["mpjpe_mm"] for name in per]
+        pk = [per[name][m]["pck"] for name in per]
+        worst = min(per, key=lambda name, m=m: per[name][m]["pck"])
+        summary[f"{m}_mean_over_sequences"] = {"mpjpe_mm": float(np.mean(mp)),
+                                               "pck": float(np.mean(pk))}  # fmt: skip
+        summary[f"{m}_worst_sequence"] = {"name": worst, **per[worst][m]}
+        mean_row += [f"{np.mean(mp):.1f}", f"{np.mean(pk):.3f}"]
+        worst_row += [f"{per[worst][m]['mpjpe_mm']:.1f}", f"{per[worst][m]['pck']:.3f} ({worst})"]
+    overall = ["all frames", str(sum(int(r[1]) for r in rows))]
     per_joint = {}
     for m in modes:
         p, g = np.concatenate(preds[m]), np.concatenate(gts[m])
@@ -228,7 +241,13 @@ def main(argv: list[str] | None = None) -> int:
         ]
     header = ["sequence", "frames"] + [f"{m} {k}" for m in modes for k in ("MPJPE mm", "PCK")]
     print()
-    print(_table(header, [*rows, overall]))
+    print(_table(header, [*rows, overall, mean_row, worst_row]))
+    for m in modes:
+        p, g = np.concatenate(preds[m]), np.concatenate(gts[m])
+        torso = np.linalg.norm(p[:, 8] - g[:, 8], axis=-1)
+        off = float(np.mean(~(torso <= 0.15)))
+        summary[f"{m}_torso_off_15cm"] = off
+        print(f"{m}: torso joint more than 15 cm off in {100 * off:.1f} % of frames")
     if args.per_joint:
         print()
         jrows = [

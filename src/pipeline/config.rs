@@ -12,6 +12,11 @@ pub struct PipelineConfig {
     pub candidates: usize,
     /// Hypotheses (after ranking all by their depth discrepancy) refined by EM.
     pub hypotheses: usize,
+    /// Each template hypothesis is also tried turned around (seen from behind).
+    pub back_views: bool,
+    /// The template search also runs on the view that makes a lying or leaning body
+    /// upright, and upside down.
+    pub any_roll: bool,
     /// EM iterations of each hypothesis before choosing.
     pub candidate_iterations: usize,
     /// The best this many candidate fits are refined fully, in parallel, and the best of
@@ -80,6 +85,8 @@ impl Default for PipelineConfig {
         PipelineConfig {
             candidates: 4,
             hypotheses: 20,
+            back_views: true,
+            any_roll: true,
             candidate_iterations: 2,
             finals: 3,
             final_iterations: Some(10),

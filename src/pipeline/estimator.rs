@@ -5,6 +5,9 @@
 use super::confidence::joint_confidence;
 use super::config::PipelineConfig;
 use super::hypotheses::{rest_pose_penalty, template_starts};
+use super::orientation::{
+    long_axis_tilt, rotate_about_optical_axis, rotated_view, search_rotations,
+};
 use super::resolution::WorkingResolution;
 use super::result::{Clock, PoseResult, SegmentSummary, Source};
 use crate::body::{BodyModel, Pose};
@@ -20,6 +23,9 @@ use std::sync::Arc;
 
 /// The depth difference (m) at which a pixel of the discrepancy counts fully.
 pub const DISCREPANCY_CAP: f64 = 0.1;
+
+/// Pixels around the person in a rotated view.
+const VIEW_MARGIN: usize = 8;
 
 /// The short list of the template search's pruning stage.
 const SHORTLIST: usize = 16;
@@ -225,24 +231,55 @@ impl Estimator {
         rest_pose_penalty(pose, self.config.pose_prior_weight)
     }
 
-    /// Start poses from the template search (see [`template_starts`]).
+    /// Start poses from the template search (see [`template_starts`]): on the frame as
+    /// it is when the person is about upright, else on a view rotated to make it so
+    /// ([`super::orientation`]), and, with `any_roll`, also upside down.
     pub(crate) fn template_hypotheses(&self, frame: &Frame) -> Result<Vec<Pose>> {
         let camera = &self.resolution.working;
-        let view = DepthView::new(&frame.depth, camera.height, camera.width, "depth")?;
         let config = MatchConfig {
             top_k: self.config.candidates,
             shortlist: SHORTLIST.max(self.config.candidates),
             ..MatchConfig::default()
         };
-        let found = self
-            .templates
-            .match_depth(&view, camera, Some(&frame.mask), &config)?;
-        if found.candidates.is_empty() {
+        let rotations = if self.config.any_roll {
+            search_rotations(long_axis_tilt(&frame.depth, &frame.mask, camera))
+        } else {
+            vec![0.0]
+        };
+        let mut candidates = Vec::new();
+        for roll in rotations {
+            if roll == 0.0 {
+                let view = DepthView::new(&frame.depth, camera.height, camera.width, "depth")?;
+                let found =
+                    self.templates
+                        .match_depth(&view, camera, Some(&frame.mask), &config)?;
+                candidates.extend(found.candidates);
+            } else {
+                let v = rotated_view(&frame.depth, &frame.mask, camera, -roll, VIEW_MARGIN)?;
+                let c = &v.camera;
+                let view = DepthView::new(&v.depth, c.height, c.width, "depth")?;
+                let found = match self.templates.match_depth(&view, c, Some(&v.mask), &config) {
+                    Ok(f) => f,
+                    // A view the matcher cannot use (too few pixels) adds nothing.
+                    Err(Error::NoBody(_)) => continue,
+                    Err(e) => return Err(e),
+                };
+                candidates.extend(found.candidates.into_iter().map(|mut k| {
+                    k.pose = rotate_about_optical_axis(&k.pose, roll);
+                    k
+                }));
+            }
+        }
+        if candidates.is_empty() {
             return Err(Error::NoBody(
                 "depth: no template matched the foreground".into(),
             ));
         }
-        Ok(template_starts(&self.model, &found.candidates))
+        Ok(template_starts(
+            &self.model,
+            &candidates,
+            self.config.back_views,
+        ))
     }
 
     /// The best fit from the template hypotheses (and `extra` start poses, always

@@ -8,8 +8,10 @@
 //! the right and left blocks and negating the lateral neck bend mirrors the body in its
 //! own sagittal plane.
 
-use crate::body::{BodyModel, Pose, NUM_PARAMS};
+use crate::body::{root_rotation, BodyModel, Pose, NUM_PARAMS};
 use crate::templates::Candidate;
+use nalgebra::{Rotation3, Vector3};
+use std::f64::consts::PI;
 
 /// The neck's lateral bend.
 const NECK_LATERAL: usize = 7;
@@ -50,6 +52,18 @@ pub fn mirror_view(pose: &Pose) -> Pose {
     out
 }
 
+/// The body turned about its own vertical axis (body y) through the hip centre by a
+/// half turn: a front view becomes a back view with the same limb angles. The image
+/// silhouette of the turned body is about the mirror image of the original's, so
+/// `turn_around(mirror_view(p))` is the back-view reading of a front-view template
+/// `p`. An involution up to the rotation vector's representation.
+pub fn turn_around(pose: &Pose) -> Pose {
+    let r = root_rotation(pose) * Rotation3::from_axis_angle(&Vector3::y_axis(), PI);
+    let mut out = *pose;
+    out[3..6].copy_from_slice(r.scaled_axis().as_slice());
+    out
+}
+
 /// `weight` × Σ θ² over the 14 limb angles (radians; 0 is the rest pose: arms hanging,
 /// legs straight): a pose's distance from the ordinary, added to its depth discrepancy
 /// where poses compete.
@@ -58,15 +72,24 @@ pub fn rest_pose_penalty(pose: &Pose, weight: f64) -> f64 {
 }
 
 /// Start poses from template candidates: each candidate's pose, its left/right-swapped
-/// pose and the mirror images of both (the search cannot tell a side view's near limbs
-/// from its far ones, nor a view from its mirror image), near-duplicates dropped.
-pub fn template_starts(model: &BodyModel, candidates: &[Candidate]) -> Vec<Pose> {
-    let mut out: Vec<Pose> = Vec::with_capacity(4 * candidates.len());
-    let mut kept: Vec<[nalgebra::Vector3<f64>; crate::body::NUM_JOINTS]> = Vec::new();
+/// pose, the mirror images of both (the search cannot tell a side view's near limbs
+/// from its far ones, nor a view from its mirror image) and, with `back_views`, all
+/// four turned around (a body seen from behind has about the silhouette of one seen
+/// from the front); near-duplicates dropped.
+pub fn template_starts(model: &BodyModel, candidates: &[Candidate], back_views: bool) -> Vec<Pose> {
+    let mut out: Vec<Pose> = Vec::with_capacity(8 * candidates.len());
+    let mut kept: Vec<[Vector3<f64>; crate::body::NUM_JOINTS]> = Vec::new();
     for c in candidates {
         let p = c.pose;
         let s = swap_limbs(&p);
-        for q in [p, s, mirror_view(&p), mirror_view(&s)] {
+        let front = [p, s, mirror_view(&p), mirror_view(&s)];
+        let back = front.map(|q| turn_around(&q));
+        let all = if back_views {
+            &[front, back][..]
+        } else {
+            &[front][..]
+        };
+        for q in all.iter().flatten().copied() {
             let j = model.joints(&q);
             let duplicate = kept.iter().any(|k| {
                 let mean =
@@ -86,7 +109,6 @@ pub fn template_starts(model: &BodyModel, candidates: &[Candidate]) -> Vec<Pose>
 mod tests {
     use super::*;
     use crate::body::BodyModel;
-    use nalgebra::{Rotation3, Vector3};
 
     fn pose() -> Pose {
         let mut p = BodyModel::neutral_pose();
@@ -130,6 +152,27 @@ mod tests {
         let m = mirror_view(&p);
         let got = Rotation3::from_scaled_axis(Vector3::new(m[3], m[4], m[5])).into_inner();
         assert!((got - f * r * f).norm() < 1e-12);
+    }
+
+    #[test]
+    fn turning_around_faces_the_body_the_other_way() {
+        let model = BodyModel::new(1.75).unwrap();
+        let p = pose();
+        let t = turn_around(&p);
+        // Twice is the same body.
+        let (j, jj) = (model.joints(&p), model.joints(&turn_around(&t)));
+        for (a, b) in j.iter().zip(&jj) {
+            assert!((a - b).norm() < 1e-9);
+        }
+        // Each joint is reflected through the body's vertical axis: in the body frame
+        // (x left, y down, z back) x and z change sign, y stays.
+        let r = root_rotation(&p);
+        let jt = model.joints(&t);
+        let hip = Vector3::new(p[0], p[1], p[2]);
+        for (a, b) in j.iter().zip(&jt) {
+            let (ba, bb) = (r.inverse() * (a - hip), r.inverse() * (b - hip));
+            assert!((bb - Vector3::new(-ba.x, ba.y, -ba.z)).norm() < 1e-9);
+        }
     }
 
     #[test]

@@ -11,13 +11,14 @@ pub mod confidence;
 pub mod config;
 pub mod estimator;
 pub mod hypotheses;
+pub mod orientation;
 pub mod resolution;
 pub mod result;
 pub mod tracker;
 
 pub use config::PipelineConfig;
 pub use estimator::Estimator;
-pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs};
+pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs, turn_around};
 pub use result::{PoseResult, SegmentSummary, Source, Timings};
 pub use tracker::Tracker;
 

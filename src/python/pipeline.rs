@@ -42,6 +42,17 @@ fn int_field(value: &Bound<PyAny>, name: &str) -> PyResult<usize> {
         .map_err(|_| Error::invalid(name, format!("expected an integer >= 0, got {v}")).into())
 }
 
+fn bool_field(value: &Bound<PyAny>, name: &str) -> PyResult<bool> {
+    if !value.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(Error::invalid(
+            name,
+            format!("expected True or False, got {}", short(value)),
+        )
+        .into());
+    }
+    value.extract()
+}
+
 fn real_field(value: &Bound<PyAny>, name: &str) -> PyResult<f64> {
     let number = value.is_instance_of::<PyFloat>()
         || (value.is_instance_of::<PyInt>() && !value.is_instance_of::<pyo3::types::PyBool>())
@@ -84,6 +95,8 @@ impl PyPipelineConfig {
                 match n {
                     "candidates" => c.candidates = int_field(&value, n)?,
                     "hypotheses" => c.hypotheses = int_field(&value, n)?,
+                    "back_views" => c.back_views = bool_field(&value, n)?,
+                    "any_roll" => c.any_roll = bool_field(&value, n)?,
                     "candidate_iterations" => c.candidate_iterations = int_field(&value, n)?,
                     "finals" => c.finals = int_field(&value, n)?,
                     "final_iterations" => {
@@ -146,6 +159,8 @@ impl PyPipelineConfig {
         let d = PyDict::new(py);
         d.set_item("candidates", c.candidates)?;
         d.set_item("hypotheses", c.hypotheses)?;
+        d.set_item("back_views", c.back_views)?;
+        d.set_item("any_roll", c.any_roll)?;
         d.set_item("candidate_iterations", c.candidate_iterations)?;
         d.set_item("finals", c.finals)?;
         d.set_item("final_iterations", c.final_iterations)?;
