@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ._core import Camera, DepthPoseError, InvalidInputError, NoBodyError
+from . import _validate
+from ._core import Camera, DepthPoseError, InvalidInputError, InvalidTypeError, NoBodyError
 from .cloud import foreground_mask
 
 __all__ = [
@@ -379,13 +380,31 @@ class PoseEstimator:
         background: np.ndarray | None = None,
     ) -> None:
         if not isinstance(camera, Camera):
-            raise InvalidInputError(
+            raise InvalidTypeError(
                 f"camera: expected a depthpose.Camera, got {type(camera).__name__}"
             )
         self.camera = camera
+        from .body import BodyModel
+        from .templates import TemplateDatabase
+
+        if model is not None and not isinstance(model, BodyModel):
+            raise InvalidTypeError(
+                f"model: expected a depthpose.BodyModel or None, got {type(model).__name__}"
+            )
+        if templates is not None and not isinstance(templates, TemplateDatabase):
+            raise InvalidTypeError(
+                f"templates: expected a TemplateDatabase or None, got {type(templates).__name__}"
+            )
+        if background is not None:
+            _validate.depth_image(background, "background")
+            if background.shape != camera.shape:
+                raise InvalidInputError(
+                    f"background: shape {background.shape} does not match the camera's "
+                    f"{camera.shape}"
+                )
         self.model = _model(model)
         if config is not None and not isinstance(config, PipelineConfig):
-            raise InvalidInputError(
+            raise InvalidTypeError(
                 f"config: expected a PipelineConfig, got {type(config).__name__}"
             )
         self.config = config or PipelineConfig()
@@ -403,7 +422,10 @@ class PoseEstimator:
 
     def _mask(self, depth: np.ndarray, mask: np.ndarray | None) -> np.ndarray:
         if mask is not None:
-            return np.ascontiguousarray(mask, dtype=bool)
+            # bool, or integers 0 and 1; anything else (a string array, floats) is
+            # refused rather than cast to bool.
+            shape = depth.shape if isinstance(depth, np.ndarray) else self.camera.shape
+            return _validate.mask(mask, shape)
         return foreground_mask(depth, self.background)
 
     def _fit_config(self, iterations=None, stride=None, label_all_pixels=None):
@@ -873,9 +895,25 @@ def estimate_frames(
     ``calibrate``: the tracker's shape calibration (see :class:`PoseTracker`); the
     tracker's calibration outcome is in ``FramesResult.shape_factors`` /
     ``calibration_error``."""
-    frames = np.asarray(frames)
+    if isinstance(frames, (list, tuple)):
+        try:
+            frames = np.asarray(frames)
+        except (ValueError, TypeError):
+            raise InvalidInputError("frames: not a stack of equally sized depth images") from None
+    if not isinstance(frames, np.ndarray):
+        raise InvalidTypeError(f"frames: expected a numpy array, got {type(frames).__name__}")
     if frames.ndim != 3:
         raise InvalidInputError(f"frames: expected (T, H, W), got shape {frames.shape}")
+    if frames.dtype.kind not in "fu":
+        raise (InvalidTypeError if frames.dtype.kind in "OUSV" else InvalidInputError)(
+            f"frames: depth must be float metres or uint16 millimetres, got dtype {frames.dtype}"
+        )
+    warmup = _validate.integer(warmup, "warmup", low=0, high=frames.shape[0])
+    first_frame = _validate.integer(first_frame, "first_frame", low=0)
+    if not isinstance(track, (bool, np.bool_)):
+        raise InvalidTypeError(f"track: expected True or False, got {type(track).__name__}")
+    if on_frame is not None and not callable(on_frame):
+        raise InvalidTypeError(f"on_frame: expected a callable, got {type(on_frame).__name__}")
     n = frames.shape[0] - warmup
     if n < 0:
         raise InvalidInputError(f"warmup: {warmup} exceeds the {frames.shape[0]} frames")
