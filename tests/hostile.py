@@ -36,7 +36,7 @@ def fuzz(default: int = 25) -> settings:
     )
 
 
-_DEBUG = re.compile(r"\w+ \{ \w+: |Some\(|Ok\(|Err\(|\bNone\b\)|0x[0-9a-f]{12}")
+_DEBUG = re.compile(r"\w+ \{ \w+: |Some\(|Ok\(|Err\(|\bNone\b\)|\b0x[0-9a-f]{12}")
 _LONG_NUMBER = re.compile(r"\d{41,}")
 
 

@@ -262,3 +262,26 @@ def test_depth_from_disparity_never_returns_garbage(d):
     z = outcome(lambda: dp.stereo.depth_from_disparity(d.reshape(1, 2), 500.0, 0.1))
     if not isinstance(z, dp.DepthPoseError):
         assert np.isfinite(z).all() and (z >= 0).all()
+
+
+def test_projections_beyond_the_float_range_are_not_returned():
+    uv = CAM.project(np.array([[1.0, 1.0, 1e-320], [0.0, 0.0, 2.0]]))
+    assert np.isnan(uv[0]).all() and np.isfinite(uv[1]).all()
+    refused(
+        lambda: CAM.back_project(np.array([[1e300, 0.0]]), np.array([1e300])),
+        dp.InvalidInputError,
+        "depth",
+    )
+
+
+def test_the_tracker_recovers_after_hostile_frames():
+    tracker = dp.PoseTracker(CAM, templates=dp.TemplateDatabase.default(progress=False),
+                             calibrate=False)  # fmt: skip
+    first = tracker.update(DEPTH)
+    for frame in (np.zeros_like(DEPTH), np.full_like(DEPTH, np.nan), -DEPTH, DEPTH[:10],
+                  DEPTH.astype(object), np.asfortranarray(DEPTH)):  # fmt: skip
+        refused(lambda f=frame: tracker.update(f))
+    refused(lambda: tracker.update(DEPTH, np.where(DEPTH > 0, "1", "0")), dp.InvalidTypeError)
+    again = tracker.update(DEPTH)
+    assert np.isfinite(again.joints).all()
+    assert np.abs(again.joints - first.joints).max() < 0.05

@@ -136,7 +136,8 @@ impl PyCamera {
         [self.inner.fx, self.inner.fy, self.inner.cx, self.inner.cy]
     }
 
-    /// Pixel coordinates (N, 2) [u, v] of camera-frame points (N, 3); NaN behind the camera.
+    /// Pixel coordinates (N, 2) [u, v] of camera-frame points (N, 3); NaN behind the
+    /// camera (or too near its plane to project within the float range).
     fn project<'py>(
         &self,
         py: Python<'py>,
@@ -156,8 +157,10 @@ impl PyCamera {
                 .chunks_exact(3)
                 .flat_map(
                     |q| match cam.project(&nalgebra::Vector3::new(q[0], q[1], q[2])) {
-                        Some((u, v)) => [u, v],
-                        None => [f64::NAN, f64::NAN],
+                        // A point so near the camera plane that it projects beyond the
+                        // float range is in no image either.
+                        Some((u, v)) if u.is_finite() && v.is_finite() => [u, v],
+                        _ => [f64::NAN, f64::NAN],
                     },
                 )
                 .collect()
@@ -195,6 +198,16 @@ impl PyCamera {
                 })
                 .collect()
         })?;
+        if let Some(k) = out.iter().position(|v| !v.is_finite()) {
+            return Err(invalid(
+                "depth",
+                format!(
+                    "the point of pixel {} at depth {} is beyond the float64 range",
+                    k / 3,
+                    brief(z.data[k / 3])
+                ),
+            ));
+        }
         to_numpy(py, out, &[z.shape[0], 3])
     }
 
