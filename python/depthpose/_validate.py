@@ -45,13 +45,19 @@ def brief(value: Any) -> str:
     if isinstance(value, (bool, np.bool_)):
         return str(bool(value))
     if isinstance(value, numbers.Integral):
-        text = str(int(value))
+        try:
+            text = str(int(value))
+        except ValueError:  # beyond Python's limit on printed digits
+            return "an integer of thousands of digits"
         if len(text) <= 20:
             return text
         sign, digits = ("-", text[1:]) if text.startswith("-") else ("", text)
         return f"{sign}{digits[0]}.{digits[1:4]}e{len(digits) - 1}"
     if isinstance(value, numbers.Real):
-        return f"{float(value):.8g}"
+        try:
+            return f"{float(value):.8g}"
+        except (OverflowError, ValueError):
+            return "a number beyond the float range"
     return type_name(value)
 
 

@@ -150,7 +150,9 @@ class PipelineConfig:
         def count(name: str, low: int) -> None:
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < low:
-                raise InvalidInputError(f"{name}: expected an integer >= {low}, got {v!r}")
+                raise InvalidInputError(
+                    f"{name}: expected an integer >= {low}, got {_validate.brief(v)}"
+                )
 
         def real(name: str, low: float, high: float = np.inf, *, inf: bool = False) -> None:
             v = getattr(self, name)
@@ -158,11 +160,15 @@ class PipelineConfig:
             ok = ok and (bool(np.isfinite(v)) or (inf and v == np.inf)) and low <= v <= high
             if not ok:
                 what = "number (or inf)" if inf else "finite number"
-                raise InvalidInputError(f"{name}: expected a {what} in [{low}, {high}], got {v!r}")
+                raise InvalidInputError(
+                    f"{name}: expected a {what} in [{low}, {high}], got {_validate.brief(v)}"
+                )
 
         count("candidates", 1)
         if self.candidates > 768:  # the template search's top_k
-            raise InvalidInputError(f"candidates: expected 1..768, got {self.candidates!r}")
+            raise InvalidInputError(
+                f"candidates: expected 1..768, got {_validate.brief(self.candidates)}"
+            )
         count("hypotheses", 0)
         count("finals", 1)
         count("candidate_iterations", 1)
@@ -981,7 +987,9 @@ def estimate_stereo(
         raise InvalidInputError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
     number = isinstance(baseline, (int, float, np.integer, np.floating))
     if isinstance(baseline, bool) or not number:
-        raise InvalidInputError(f"baseline: expected a number of metres, got {baseline!r}")
+        raise InvalidTypeError(
+            f"baseline: expected a number of metres, got {_validate.type_name(baseline)}"
+        )
     if not (np.isfinite(baseline) and baseline > 0):
         raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
     if mask is not None and background is not None:

@@ -118,15 +118,23 @@ const ENOENT: i32 = 2;
 
 impl From<Error> for PyErr {
     fn from(e: Error) -> PyErr {
-        let msg = e.to_string();
+        // Numbers printed in full (1e300 has 301 digits) are shortened wherever the
+        // message was made; a file's path is kept as it is.
+        let brief = |m: &str| crate::error::brief_numbers(m).into_owned();
         match e {
-            Error::InvalidArgument { .. } => InvalidInputError::new_err(msg),
-            Error::File { .. } => FileFormatError::new_err(msg),
+            Error::InvalidArgument { name, message } => {
+                InvalidInputError::new_err(format!("{name}: {}", brief(&message)))
+            }
+            Error::File { path, message } => {
+                FileFormatError::new_err(format!("{path}: {}", brief(&message)))
+            }
             Error::NotFound { path } => {
                 PyErr::new::<MissingFileError, _>((ENOENT, "no such file".to_string(), path))
             }
-            Error::NoBody(_) => NoBodyError::new_err(msg),
-            Error::ResourceLimit { .. } => ResourceLimitError::new_err(msg),
+            Error::NoBody(message) => NoBodyError::new_err(brief(&message)),
+            Error::ResourceLimit { name, message } => {
+                ResourceLimitError::new_err(format!("{name}: {}", brief(&message)))
+            }
         }
     }
 }
