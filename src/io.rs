@@ -5,9 +5,9 @@ use crate::error::{brief, Error, Result};
 use image::{DynamicImage, ImageDecoder, ImageError, ImageReader};
 use std::path::Path;
 
-/// Largest image read, written or rendered (height × width): 2^25 pixels, e.g.
-/// 8192 × 4096.
-pub const MAX_IMAGE_PIXELS: usize = 1 << 25;
+/// Largest image read, written or rendered (height × width): 2^23 pixels, e.g.
+/// 4096 × 2048.
+pub const MAX_IMAGE_PIXELS: usize = 1 << 23;
 /// Smallest metres-per-unit scale of an integer depth file (a micrometre).
 pub const MIN_DEPTH_SCALE: f64 = 1e-6;
 /// Largest metres-per-unit scale of an integer depth file (a metre).

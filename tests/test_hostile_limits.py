@@ -63,7 +63,24 @@ def test_results_too_large_to_allocate_are_refused_naming_the_limit():
         ),
         "MAX_LABELS",
     )
-    assert graphcut.MAX_LABELS == 1024 and dp.MAX_IMAGE_PIXELS == 2**25
+    assert graphcut.MAX_LABELS == 1024 and dp.MAX_IMAGE_PIXELS == 2**23
+
+
+def test_fits_of_more_points_than_the_limit_are_refused_at_once():
+    big = dp.Camera(900.0, 900.0, 639.5, 511.5, 1280, 1024)
+    depth = np.full((1024, 1280), 2.0, np.float32)
+    for call in (
+        lambda: dp.fit_pose(depth, big, POSE),
+        lambda: dp.fit_poses(depth, big, POSE[None]),
+        lambda: dp.fit_shape(depth[None], big, POSE[None]),
+        lambda: dp.surface_context(depth, big),
+        lambda: dp.TemplateDatabase.default(progress=False).match(depth, big),
+    ):
+        quick(call, "MAX_FIT_POINTS")
+    # A mask of the person keeps the same image within the limit.
+    mask = np.zeros(depth.shape, bool)
+    mask[400:600, 600:700] = True
+    assert dp.surface_context(depth, big, mask)[0].shape[0] > 0
 
 
 # ---- arithmetic overflow: no hang, no infinite energy --------------------------------

@@ -13,8 +13,8 @@ Errors: every error depthpose raises about its input is a :class:`DepthPoseError
   :class:`MissingFileError` (also a ``FileNotFoundError``) a file that does not exist.
 - :class:`NoBodyError`: no usable body in the input (no valid depth, no foreground).
 - :class:`ResourceLimitError`: an input, or the result it asks for, beyond a size limit
-  (:data:`MAX_IMAGE_PIXELS`, :data:`MAX_ARRAY_ELEMENTS`, :data:`MAX_RESULT_BYTES`),
-  checked before anything is allocated.
+  (:data:`MAX_IMAGE_PIXELS`, :data:`MAX_ARRAY_ELEMENTS`, :data:`MAX_RESULT_BYTES`,
+  :data:`MAX_FIT_POINTS`), checked before anything is allocated.
 
 Nothing panics, aborts or hangs on bad input; see ``docs/robustness.md``.
 """
@@ -24,6 +24,7 @@ from __future__ import annotations
 from . import graphcut, io, stereo, synth, viz
 from ._core import (
     MAX_ARRAY_ELEMENTS,
+    MAX_FIT_POINTS,
     MAX_IMAGE_PIXELS,
     MAX_RESULT_BYTES,
     Camera,
@@ -75,6 +76,7 @@ __all__ = [
     "InvalidInputError",
     "InvalidTypeError",
     "MAX_ARRAY_ELEMENTS",
+    "MAX_FIT_POINTS",
     "MAX_IMAGE_PIXELS",
     "MAX_RESULT_BYTES",
     "MissingFileError",

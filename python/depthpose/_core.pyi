@@ -34,8 +34,11 @@ class ResourceLimitError(DepthPoseError):
     limit. Checked before anything is allocated or copied."""
 
 #: Largest image (height × width) read, written, rendered or passed as a depth image,
-#: mask or picture: 2**25 pixels.
+#: mask or picture: 2**23 pixels.
 MAX_IMAGE_PIXELS: int
+#: Most depth readings (within the mask) one body fit, shape calibration, template
+#: match or descriptor takes: 2**20.
+MAX_FIT_POINTS: int
 #: Largest number of elements of any other array argument: 2**26.
 MAX_ARRAY_ELEMENTS: int
 #: Largest result one call may allocate (an output array, a graph, meshes): 2**30 bytes.

@@ -1,8 +1,8 @@
 //! `BodyModel` for Python: kinematics, distances, Jacobians, rendering, meshes.
 
 use super::convert::{
-    bool_array, camera as camera_arg, check_image_pixels, check_result_bytes, depth_array,
-    f32_array, f64_array, fit_config, i64_array, invalid, to_numpy, Int, Real,
+    bool_array, camera as camera_arg, check_fit_points, check_image_pixels, check_result_bytes,
+    depth_array, f32_array, f64_array, fit_config, i64_array, invalid, to_numpy, Int, Real,
 };
 use super::fit::PyShapeFitResult;
 use super::{native, native_ok};
@@ -521,6 +521,11 @@ impl PyBodyModel {
                 )
             }
         };
+        let mut points = 0;
+        for (i, d) in ds.iter().enumerate() {
+            let m = ms.as_ref().map(|m| m[i].as_slice());
+            points = check_fit_points(d, m, points, "depths")?;
+        }
         let cfg = ShapeConfig {
             fit: fit_config(config, "config")?,
             rounds: iterations.in_range(1, MAX_ROUNDS, "iterations")? as usize,

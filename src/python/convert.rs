@@ -47,9 +47,12 @@ use pyo3::{PyClass, PyTypeInfo};
 use std::convert::Infallible;
 use std::path::PathBuf;
 
-/// Largest depth image, mask or picture (height × width): 2^25 pixels, e.g.
-/// 8192 × 4096. Also the largest image a camera may render.
+/// Largest depth image, mask or picture (height × width): 2^23 pixels, e.g.
+/// 4096 × 2048. Also the largest image a camera may render.
 pub const MAX_IMAGE_PIXELS: usize = crate::io::MAX_IMAGE_PIXELS;
+/// Most depth readings (in the mask) one body fit or template match takes: 2^20. A fit
+/// holds some 900 bytes per point (costs per segment, the neighbour graph, labels).
+pub const MAX_FIT_POINTS: usize = 1 << 20;
 /// Largest number of elements of any other array argument: 2^26 (512 MiB as float64).
 pub const MAX_ARRAY_ELEMENTS: usize = 1 << 26;
 /// Largest result one call may allocate (an output array, a rendered image, a graph
@@ -106,6 +109,36 @@ pub fn check_image_pixels(height: usize, width: usize, name: &str) -> PyResult<(
             ),
         )),
     }
+}
+
+/// Fails unless the depth readings of `depth` (positive, finite, in `mask`) number at
+/// most [`MAX_FIT_POINTS`] (`already`: readings counted in other frames).
+pub fn check_fit_points(
+    depth: &[f32],
+    mask: Option<&[bool]>,
+    already: usize,
+    name: &str,
+) -> PyResult<usize> {
+    let valid = |z: f32| z.is_finite() && z > 0.0;
+    let n = already
+        + match mask {
+            Some(m) => depth
+                .iter()
+                .zip(m)
+                .filter(|(&z, &on)| on && valid(z))
+                .count(),
+            None => depth.iter().filter(|&&z| valid(z)).count(),
+        };
+    if n > MAX_FIT_POINTS {
+        return Err(too_large(
+            name,
+            format!(
+                "{n} depth readings to fit exceed the limit MAX_FIT_POINTS = {MAX_FIT_POINTS}; \
+                 pass a mask of the person or a smaller image"
+            ),
+        ));
+    }
+    Ok(n)
 }
 
 // ---- numbers, flags, strings, paths --------------------------------------------------

@@ -2,8 +2,8 @@
 
 use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::convert::{
-    body_model, bool_array, camera as camera_arg, depth_array, f64_array, fit_config, invalid,
-    object, to_numpy, wrong_type, Flag, Int, Real, Text,
+    body_model, bool_array, camera as camera_arg, check_fit_points, depth_array, f64_array,
+    fit_config, invalid, object, to_numpy, wrong_type, Flag, Int, Real, Text,
 };
 use super::native;
 use crate::body::{
@@ -529,6 +529,7 @@ impl FitArgs {
             .mask
             .map(|m| bool_array(m, "mask", &[height, width]))
             .transpose()?;
+        check_fit_points(&d.data, mask.as_deref(), 0, "depth")?;
         let prior = match options.prior {
             Some(p) => {
                 let prior = pose_arg(p, "prior")?;

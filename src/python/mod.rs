@@ -55,7 +55,8 @@ create_exception!(
     ResourceLimitError,
     DepthPoseError,
     "An input, or the result it asks for, exceeds one of depthpose's size limits \
-     (MAX_IMAGE_PIXELS, MAX_ARRAY_ELEMENTS, MAX_RESULT_BYTES); the message names it."
+     (MAX_IMAGE_PIXELS, MAX_ARRAY_ELEMENTS, MAX_RESULT_BYTES, MAX_FIT_POINTS, \
+     MAX_LABELS); the message names it."
 );
 
 /// An exception class with two bases, made once per interpreter by calling `type`.
@@ -181,6 +182,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_IMAGE_PIXELS", convert::MAX_IMAGE_PIXELS)?;
     m.add("MAX_ARRAY_ELEMENTS", convert::MAX_ARRAY_ELEMENTS)?;
     m.add("MAX_RESULT_BYTES", convert::MAX_RESULT_BYTES)?;
+    m.add("MAX_FIT_POINTS", convert::MAX_FIT_POINTS)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     camera::register(m)?;
     body::register(m)?;

@@ -3,8 +3,8 @@
 use super::body::check_mesh_bytes;
 use super::camera::PyCamera;
 use super::convert::{
-    bool_array, camera as camera_arg, check_result_bytes, counts, depth_array, f32_array,
-    f64_array, i64_array, invalid, to_numpy, wrong_type, Int, Real, Text,
+    bool_array, camera as camera_arg, check_fit_points, check_result_bytes, counts, depth_array,
+    f32_array, f64_array, i64_array, invalid, to_numpy, wrong_type, Int, Real, Text,
 };
 use super::native;
 use crate::body::superquadric::MeshConfig;
@@ -156,6 +156,7 @@ fn surface_context<'py>(
     cfg.validate()?;
     let d = depth_array(depth, "depth")?;
     let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+    check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
     let sc = native(py, || -> crate::Result<_> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         surface_context_from_depth(&view, &cam, m.as_deref(), &cfg)
@@ -389,6 +390,7 @@ impl PyTemplateDatabase {
         cfg.validate()?;
         let d = depth_array(depth, "depth")?;
         let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+        check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
         let r = native(py, || -> crate::Result<_> {
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
             self.inner.match_depth(&view, &cam, m.as_deref(), &cfg)
@@ -447,6 +449,7 @@ impl PyTemplateDatabase {
         }
         let d = depth_array(depth, "depth")?;
         let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+        check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
         let r = native(py, || -> crate::Result<Vec<f64>> {
             use rayon::prelude::*;
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
