@@ -54,7 +54,8 @@ def _load(path: Path, frames: int | None, start: int):
     return seq, depth, gt
 
 
-def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None):
+def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None,
+         background=True):  # fmt: skip
     from depthpose.pipeline import estimate_frames
 
     sources: list[str] = []
@@ -72,7 +73,7 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
     r = estimate_frames(
         depth[idx],
         seq.camera,
-        background=seq.background,
+        background=seq.background if background else None,
         track=track,
         templates=templates,
         config=config,
@@ -129,6 +130,13 @@ def main(argv: list[str] | None = None) -> int:
         default=0.0,
         help="templates with the relief channel of this weight (default 0: the default database)",
     )
+    ap.add_argument(
+        "--background",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="use the sequence's frame of the empty scene (--no-background: segment "
+        "the person automatically)",
+    )
     args = ap.parse_args(argv)
     if args.step < 1:
         ap.error("--step must be >= 1")
@@ -167,7 +175,8 @@ def main(argv: list[str] | None = None) -> int:
         summary["sequences"][f.stem] = {}
         for m in modes:
             idx, r, t, wall = _run(depth, seq, templates, config, track=m == "track",
-                                   step=args.step, model=model, calibrate=calibrate)  # fmt: skip
+                                   step=args.step, model=model, calibrate=calibrate,
+                                   background=args.background)  # fmt: skip
             acc = evaluate(r.joints, gt[idx])
             preds[m].append(r.joints)
             gts[m].append(gt[idx])

@@ -6,6 +6,9 @@
 use crate::error::{ensure, ensure_positive, Result};
 use nalgebra::Vector3;
 
+/// Focal length per pixel of image width of [`Camera::nominal`].
+pub const NOMINAL_FOCAL_PER_WIDTH: f64 = 0.9;
+
 /// Pinhole intrinsics plus the image size they belong to.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Camera {
@@ -50,6 +53,22 @@ impl Camera {
             width,
             height,
         })
+    }
+
+    /// A camera for an image of `width`×`height` whose intrinsics are unknown: the
+    /// principal point at the centre and a focal length of 0.9·width pixels (a 58°
+    /// horizontal field of view, as the Kinect v1, ITOP and most structured-light and
+    /// time-of-flight depth cameras have within ±15 %).
+    pub fn nominal(width: usize, height: usize) -> Result<Self> {
+        let f = NOMINAL_FOCAL_PER_WIDTH * width as f64;
+        Camera::new(
+            f,
+            f,
+            0.5 * (width as f64 - 1.0),
+            0.5 * (height as f64 - 1.0),
+            width,
+            height,
+        )
     }
 
     /// Kinect v1 depth camera at 640×480 (f ≈ 580 px).

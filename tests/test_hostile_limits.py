@@ -204,10 +204,11 @@ def test_masks_must_be_bool_or_zero_one_integers():
     refused(
         lambda: dp.depth_to_points(DEPTH, CAM, mask.astype(float)), dp.InvalidInputError, "mask"
     )
-    est = dp.PoseEstimator(CAM, templates=dp.TemplateDatabase.default(progress=False))
+    db = dp.TemplateDatabase.default(progress=False)
+    est = dp.PoseEstimator(CAM, templates=db)
     refused(lambda: est.estimate(DEPTH, words), dp.InvalidTypeError, "mask")
     refused(lambda: est.estimate(DEPTH, mask.astype(np.int64) * 2), dp.InvalidInputError, "mask")
-    tracker = dp.PoseTracker(CAM, templates=est.templates, calibrate=False)
+    tracker = dp.PoseTracker(CAM, templates=db, calibrate=False)
     refused(lambda: tracker.update(DEPTH, words), dp.InvalidTypeError, "mask")
 
 
@@ -270,7 +271,11 @@ def test_numpy_scalars_are_numbers():
     assert cam.shape == (30, 40)
     assert dp.stereo.depth_from_disparity(np.ones((2, 2)), np.float32(10), np.int8(1))[0, 0] == 10
     depth = np.where(DEPTH > 0, DEPTH, 0)
-    assert dp.foreground_mask(depth, min_depth=np.float32(0.5), min_component=np.uint8(5)).any()
+    background = np.full_like(depth, 5.0)
+    mask = dp.foreground_mask(
+        depth, background, min_depth=np.float32(0.5), min_component=np.uint8(5)
+    )
+    assert mask.any()
 
 
 @fuzz(30)

@@ -41,7 +41,15 @@ from ._core import (
     surface_normals,
 )
 from .body import BodyModel
-from .cloud import PointCloud, foreground_mask, point_cloud
+from .cloud import (
+    Cluster,
+    Plane,
+    PointCloud,
+    Segmentation,
+    foreground_mask,
+    point_cloud,
+    segment_person,
+)
 from .fit import (
     FitConfig,
     FitResult,
@@ -83,6 +91,10 @@ __all__ = [
     "NoBodyError",
     "ResourceLimitError",
     "PointCloud",
+    "Cluster",
+    "Plane",
+    "Segmentation",
+    "segment_person",
     "TemplateDatabase",
     "__version__",
     "depth_to_points",

@@ -104,6 +104,7 @@ def foreground_mask(
     depth: npt.NDArray[np.generic],
     background: npt.NDArray[np.generic] | None = None,
     *,
+    camera: Camera | None = None,
     min_depth: float = 0.3,
     max_depth: float = 8.0,
     bg_tolerance: float = 0.025,
@@ -548,3 +549,246 @@ def stereo_match(
 def depth_from_disparity(
     disparity: np.ndarray, focal: float, baseline: float, doffs: float = 0.0
 ) -> npt.NDArray[np.float32]: ...
+
+# ---- person segmentation ------------------------------------------------------------
+class Plane:
+    """A support plane ``normal · X = offset`` (camera frame, metres, ``offset > 0``)."""
+
+    @property
+    def normal(self) -> list[float]: ...
+    @property
+    def offset(self) -> float: ...
+    @property
+    def inliers(self) -> int: ...
+    @property
+    def area(self) -> float: ...
+
+class Cluster:
+    """A depth-continuous cluster of pixels, measured in metres."""
+
+    @property
+    def pixels(self) -> int: ...
+    @property
+    def area(self) -> float: ...
+    @property
+    def height(self) -> float: ...
+    @property
+    def width(self) -> float: ...
+    @property
+    def centroid(self) -> list[float]: ...
+    @property
+    def median_depth(self) -> float: ...
+    @property
+    def bbox(self) -> list[int]: ...
+    @property
+    def person_like(self) -> bool: ...
+    @property
+    def score(self) -> float: ...
+
+class Segmentation:
+    """The person's pixels and how they were found (see ``depthpose.segment_person``)."""
+
+    @property
+    def mask(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def method(self) -> str: ...
+    @property
+    def planes(self) -> list[Plane]: ...
+    @property
+    def person(self) -> Cluster: ...
+    @property
+    def others(self) -> list[Cluster]: ...
+
+def segment_person(
+    depth: npt.NDArray[np.generic],
+    camera: Camera,
+    background: npt.NDArray[np.generic] | None = None,
+    *,
+    previous: Segmentation | None = None,
+) -> Segmentation: ...
+
+# ---- pipeline -----------------------------------------------------------------------
+JOINT_NAMES: list[str]
+
+class PipelineConfig:
+    """Settings of the estimator and the tracker; keyword arguments, each optional.
+
+    Parameters
+    ----------
+    candidates
+        Template candidates taken from the search from scratch (each also gives its
+        left/right-swapped and mirrored-view hypotheses). Default 4.
+    hypotheses
+        Hypotheses, ranked by depth discrepancy, refined by brief EM fits. Default 20.
+    candidate_iterations
+        EM iterations of each brief fit. Default 2.
+    finals
+        The best brief fits refined fully. Default 3.
+    final_iterations
+        EM iterations of each final (None: ``fit.max_iterations``). Default 10.
+    candidate_stride, final_stride
+        Pixel strides of the brief and the final fits. Default 2 and 2.
+    prior_weight
+        Tracking: weight of the prior toward the predicted pose. Default 100.
+    track_iterations, track_stride
+        Tracking: EM iterations and pixel stride per frame. Default 4 and 2.
+    velocity_damping
+        Tracking: share of the last velocity carried into the prediction. Default 0.5.
+    min_inlier_share
+        Tracking: the track is lost when the body explains less of the person's pixels.
+        Default 0.75.
+    lost_ratio, lost_discrepancy
+        Tracking: ... or its depth discrepancy exceeds this times the recent median, or
+        this value. Default 1.6 and 0.5.
+    recheck_every
+        Tracking: the template search runs every this many frames (0 = never). Default 8.
+    recheck_hypotheses, lost_hypotheses
+        Template hypotheses of a re-check and of a lost frame. Default 4 and 8.
+    switch_margin
+        A re-check switches when it explains the depth better by this share. Default 0.1.
+    pose_prior_weight
+        Weight of the rest-pose penalty where poses compete. Default 0.005.
+    calibration_frames, calibration_every, calibration_prior_weight, calibration_rounds
+        Tracking: shape calibration over this many usable frames (0 = never), every
+        this many, with this prior weight and rounds. Default 8, 1, 1e5 and 3.
+    working_focal
+        Focal length (pixels) of the working resolution large images are reduced to.
+        Default 300.
+    fit
+        The fits' settings: a FitConfig, a dict of its keyword arguments, or None.
+
+    Raises
+    ------
+    InvalidInputError
+        An unknown name or a nonsensical value (the message names it).
+    """
+
+    def __init__(self, **kwargs: Any) -> None: ...
+    def replace(self, **kwargs: Any) -> PipelineConfig: ...
+    def as_dict(self) -> dict[str, Any]: ...
+    def __getattr__(self, name: str) -> Any: ...
+
+class PoseResult:
+    """The pose of one frame."""
+
+    @property
+    def pose(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def joints(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def joint_names(self) -> list[str]: ...
+    @property
+    def model(self) -> BodyModel: ...
+    @property
+    def shape(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def labels(self) -> npt.NDArray[np.int16]: ...
+    @property
+    def mask(self) -> npt.NDArray[np.bool_]: ...
+    @property
+    def energy(self) -> float: ...
+    @property
+    def iterations(self) -> int: ...
+    @property
+    def converged(self) -> bool: ...
+    @property
+    def confidence(self) -> npt.NDArray[np.float64]: ...
+    @property
+    def timings(self) -> dict[str, float]: ...
+    @property
+    def source(self) -> str: ...
+    @property
+    def discrepancy(self) -> float: ...
+    @property
+    def segmentation_method(self) -> str | None: ...
+    @property
+    def planes(self) -> list[Plane]: ...
+    @property
+    def others(self) -> list[Cluster]: ...
+    def with_stereo_time(self, ms: float) -> PoseResult: ...
+    def to_dict(self) -> dict[str, Any]: ...
+    def to_json(self) -> str: ...
+
+class _PoseEstimator:
+    def __init__(
+        self,
+        camera: Camera,
+        templates: _TemplateDatabase,
+        *,
+        model: BodyModel | None = None,
+        config: PipelineConfig | None = None,
+        background: npt.NDArray[np.generic] | None = None,
+    ) -> None: ...
+    def estimate(
+        self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
+    ) -> PoseResult: ...
+    def discrepancies(
+        self,
+        poses: npt.NDArray[np.generic],
+        depth: npt.NDArray[np.generic],
+        mask: npt.NDArray[np.generic] | None = None,
+    ) -> npt.NDArray[np.float64]: ...
+    def penalty(self, poses: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]: ...
+    def person_mask(self, depth: npt.NDArray[np.generic]) -> npt.NDArray[np.bool_]: ...
+    @property
+    def model(self) -> BodyModel: ...
+    @property
+    def config(self) -> PipelineConfig: ...
+    @property
+    def camera(self) -> Camera: ...
+    @property
+    def working_camera(self) -> Camera: ...
+
+class _PoseTracker:
+    def __init__(
+        self,
+        camera: Camera,
+        templates: _TemplateDatabase,
+        *,
+        model: BodyModel | None = None,
+        config: PipelineConfig | None = None,
+        background: npt.NDArray[np.generic] | None = None,
+        calibrate: bool | None = None,
+    ) -> None: ...
+    def update(
+        self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
+    ) -> PoseResult: ...
+    def reset(self, shape: bool = False) -> None: ...
+    def start_from(self, pose: npt.NDArray[np.generic]) -> None: ...
+    @property
+    def model(self) -> BodyModel: ...
+    @property
+    def base_model(self) -> BodyModel: ...
+    @property
+    def config(self) -> PipelineConfig: ...
+    @property
+    def camera(self) -> Camera: ...
+    @property
+    def lost_frames(self) -> int: ...
+    @property
+    def switches(self) -> int: ...
+    @property
+    def calibrating(self) -> bool: ...
+    @property
+    def calibrated(self) -> bool: ...
+    @property
+    def shape_factors(self) -> npt.NDArray[np.float64] | None: ...
+    @property
+    def calibration(self) -> ShapeFitResult | None: ...
+    @property
+    def calibration_error(self) -> str | None: ...
+    @property
+    def calibration_frame(self) -> int | None: ...
+
+def swap_limbs(pose: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]:
+    """The left/right-swapped pose: right and left limb angles exchanged, the lateral
+    neck bend negated, the root unchanged (the body mirrored in its own sagittal
+    plane). An involution."""
+
+def mirror_view(pose: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]:
+    """The mirror image of the posed body in the camera's vertical plane through the
+    hip centre: the same silhouette flipped left-right, limbs swapped so that the body
+    stays a right-handed one. An involution."""
+
+def rest_pose_penalty(poses: npt.NDArray[np.generic], weight: float) -> npt.NDArray[np.float64]:
+    """``weight`` × Σ θ² over the 14 limb angles of each pose (N, 22) → (N,)."""

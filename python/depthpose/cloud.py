@@ -7,9 +7,17 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import _core, _validate
-from ._core import Camera
+from ._core import Camera, Cluster, Plane, Segmentation
 
-__all__ = ["PointCloud", "point_cloud", "foreground_mask"]
+__all__ = [
+    "Cluster",
+    "Plane",
+    "PointCloud",
+    "Segmentation",
+    "foreground_mask",
+    "point_cloud",
+    "segment_person",
+]
 
 
 @dataclass(frozen=True)
@@ -53,6 +61,7 @@ def foreground_mask(
     depth: np.ndarray,
     background: np.ndarray | None = None,
     *,
+    camera: Camera | None = None,
     min_depth: float = 0.3,
     max_depth: float = 8.0,
     bg_tolerance: float = 0.025,
@@ -65,15 +74,20 @@ def foreground_mask(
 
     With ``background`` (the empty scene), foreground is what lies clearly in front of it
     (tolerance ``bg_tolerance + bg_tolerance_quadratic·z²`` metres, following the sensor's
-    quantisation). Without it, everything in ``[min_depth, max_depth]``. Candidates are
-    grouped into depth-continuous components (neighbours within ``max_step``); the nearest
-    component with at least ``large_share`` of the largest one's pixels is the body,
-    and large pieces next to it are kept too. Speckles are dropped; holes stay holes.
+    quantisation), grouped into depth-continuous components (neighbours within
+    ``max_step``); the nearest component with at least ``large_share`` of the largest
+    one's pixels is the body, and large pieces next to it are kept too.
+
+    Without it, the person is found automatically (:func:`segment_person`): the floor and
+    walls are removed and the most person-like object in ``[min_depth, max_depth]`` is
+    kept. ``camera`` gives the intrinsics for that (without it, a camera with a 58°
+    horizontal field of view is assumed). Speckles are dropped; holes stay holes.
     Raises ``NoBodyError`` when nothing qualifies.
     """
     return _core.foreground_mask(
         depth,
         background,
+        camera=camera,
         min_depth=min_depth,
         max_depth=max_depth,
         bg_tolerance=bg_tolerance,
@@ -82,3 +96,25 @@ def foreground_mask(
         min_component=min_component,
         large_share=large_share,
     )
+
+
+def segment_person(
+    depth: np.ndarray,
+    camera: Camera,
+    background: np.ndarray | None = None,
+    *,
+    previous: Segmentation | None = None,
+) -> Segmentation:
+    """The person's pixels of a depth image, and how they were found.
+
+    With ``background`` (a frame of the empty scene), by background subtraction
+    (``method == "background"``). Without it (``method == "planes"``): the support
+    planes (floor, walls) are found by RANSAC and removed, the rest is split into
+    depth-continuous clusters, and the person is the cluster that looks most like one in
+    metres (footprint area, height, width); of comparable ones, the nearest. In a video,
+    pass the previous frame's result as ``previous``: its planes are reused and the
+    person it found stays chosen when someone else comes nearer. The result lists the
+    removed ``planes`` and the ``others``: person-like clusters not chosen.
+    Raises ``NoBodyError`` (saying what was found) when nothing looks like a person.
+    """
+    return _core.segment_person(depth, camera, background, previous=previous)

@@ -174,13 +174,12 @@ def write_bvh(path: PathLike, model, poses: np.ndarray, fps: float = 30.0) -> No
 
 
 def write_jsonl(path: PathLike, results: list[Any]) -> None:
-    """One JSON line per frame (a ``PoseResult`` or None for a failed frame)."""
-    from .pipeline import PoseResult
-
+    """One JSON line per frame: a ``PoseResult`` (anything with ``to_dict()``) or None
+    for a failed frame."""
     path = _path(path)
     results = list(results)
     for k, r in enumerate(results):
-        if r is not None and not isinstance(r, PoseResult):
+        if r is not None and not callable(getattr(r, "to_dict", None)):
             raise InvalidTypeError(
                 f"results[{k}]: expected a PoseResult or None, got {type(r).__name__}"
             )

@@ -12,7 +12,7 @@ use crate::error::{ensure, Error, Result};
 use crate::union_find::UnionFind;
 
 /// Settings of [`foreground_mask`].
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ForegroundConfig {
     /// Depth range (metres) considered at all.
     pub min_depth: f32,
@@ -153,7 +153,7 @@ pub fn foreground_mask(
 }
 
 /// Passes of [`fill_dropouts`]: enough for the 1–2 pixel dropouts of depth sensors.
-const DROPOUT_FILL_PASSES: usize = 2;
+pub(crate) const DROPOUT_FILL_PASSES: usize = 2;
 
 /// Adds to the mask the pixels *without a reading* that the body surrounds: both
 /// neighbours along a row or a column, or three of the four 4-neighbours, in the mask.
@@ -161,7 +161,12 @@ const DROPOUT_FILL_PASSES: usize = 2;
 /// A real hole in the body's outline shows the scene behind it, has a reading, and stays
 /// a hole. Only pixels inside `bbox` (row0, col0, row1, col1; the mask's bounding box)
 /// can qualify: outside it at most one neighbour is in the mask. `add` is scratch.
-fn fill_dropouts(depth: &DepthView, mask: &mut [bool], bbox: [usize; 4], add: &mut Vec<usize>) {
+pub(crate) fn fill_dropouts(
+    depth: &DepthView,
+    mask: &mut [bool],
+    bbox: [usize; 4],
+    add: &mut Vec<usize>,
+) {
     let (w, h) = (depth.width, depth.height);
     add.clear();
     let rows = bbox[0].max(1)..(bbox[2] + 1).min(h.saturating_sub(1));
@@ -186,7 +191,7 @@ fn fill_dropouts(depth: &DepthView, mask: &mut [bool], bbox: [usize; 4], add: &m
 
 /// The smallest box (row0, col0, row1, col1, inclusive) holding boxes `a` and `b`; the
 /// empty box is `[usize::MAX, usize::MAX, 0, 0]`.
-fn union_box(a: [usize; 4], b: [usize; 4]) -> [usize; 4] {
+pub(crate) fn union_box(a: [usize; 4], b: [usize; 4]) -> [usize; 4] {
     [
         a[0].min(b[0]),
         a[1].min(b[1]),
@@ -197,18 +202,18 @@ fn union_box(a: [usize; 4], b: [usize; 4]) -> [usize; 4] {
 
 /// Per-component statistics.
 #[derive(Debug, Clone)]
-struct ComponentStats {
-    size: usize,
-    median_depth: f32,
-    bbox: [usize; 4], // row0, col0, row1, col1 (inclusive)
+pub(crate) struct ComponentStats {
+    pub size: usize,
+    pub median_depth: f32,
+    pub bbox: [usize; 4], // row0, col0, row1, col1 (inclusive)
 }
 
-struct Components {
+pub(crate) struct Components {
     /// Component of each pixel, −1 for non-candidates.
-    label: Vec<i32>,
+    pub label: Vec<i32>,
     /// The candidate pixels, in raster order.
-    pixels: Vec<u32>,
-    stats: Vec<ComponentStats>,
+    pub pixels: Vec<u32>,
+    pub stats: Vec<ComponentStats>,
 }
 
 impl Components {
@@ -219,7 +224,12 @@ impl Components {
     /// (not the pixels), then the final numbering and the statistics. The median depth
     /// is computed only for components of at least `min_size` pixels (the only ones
     /// [`Components::select_body`] looks at); smaller ones get NaN.
-    fn label(depth: &DepthView, candidate: &[bool], max_step: f32, min_size: usize) -> Self {
+    pub(crate) fn label(
+        depth: &DepthView,
+        candidate: &[bool],
+        max_step: f32,
+        min_size: usize,
+    ) -> Self {
         let (w, h) = (depth.width, depth.height);
         let z = depth.data;
         let mut label = vec![-1i32; w * h];

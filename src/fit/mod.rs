@@ -267,6 +267,29 @@ impl FitProblem {
         })
     }
 
+    /// Replaces the fit settings by `config`, keeping the cloud and graphs: allowed when
+    /// the stride, the connectivity and whether the free-space term is on are the same
+    /// (they decide what was built). Errors otherwise, or when `config` is invalid.
+    pub fn set_config(&mut self, config: &FitConfig) -> Result<()> {
+        config.validate()?;
+        let same = config.stride == self.config.stride
+            && config.connectivity == self.config.connectivity
+            && (config.em.free_space_weight > 0.0) == (self.config.em.free_space_weight > 0.0);
+        if !same {
+            return Err(Error::invalid(
+                "config",
+                "a fit problem keeps its stride, connectivity and free-space term",
+            ));
+        }
+        self.config = *config;
+        Ok(())
+    }
+
+    /// The fit settings.
+    pub fn config(&self) -> &FitConfig {
+        &self.config
+    }
+
     /// The whole full-resolution image for the free-space term (None when it is off).
     fn free_space_image(&self) -> Option<FreeSpaceImage<'_>> {
         (!self.depth.is_empty()).then_some(FreeSpaceImage {

@@ -7,6 +7,7 @@ use crate::cloud::{
     foreground_mask as fg_mask, neighbour_graph, normals_from_depth, Cloud, DepthView,
     ForegroundConfig, NormalConfig,
 };
+use crate::segment::{segment_person, SegmentConfig};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
@@ -131,14 +132,16 @@ fn pixel_graph<'py>(
 
 /// The person's pixels (H, W) bool. See `depthpose.foreground_mask`.
 #[pyfunction]
-#[pyo3(signature = (depth, background=None, *, min_depth=Real::new(0.3), max_depth=Real::new(8.0),
-                    bg_tolerance=Real::new(0.025), bg_tolerance_quadratic=Real::new(0.003),
-                    max_step=Real::new(0.25), min_component=Int::new(40), large_share=Real::new(0.3)))]
+#[pyo3(signature = (depth, background=None, *, camera=None, min_depth=Real::new(0.3),
+                    max_depth=Real::new(8.0), bg_tolerance=Real::new(0.025),
+                    bg_tolerance_quadratic=Real::new(0.003), max_step=Real::new(0.25),
+                    min_component=Int::new(40), large_share=Real::new(0.3)))]
 #[allow(clippy::too_many_arguments)]
 fn foreground_mask<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
     background: Option<&Bound<'py, PyAny>>,
+    camera: Option<&Bound<'py, PyAny>>,
     min_depth: Real,
     max_depth: Real,
     bg_tolerance: Real,
@@ -169,18 +172,26 @@ fn foreground_mask<'py>(
             ));
         }
     }
+    let (h, w) = (d.shape[0], d.shape[1]);
+    let camera = match camera {
+        Some(c) => camera_arg(c, "camera")?,
+        None => Camera::nominal(w, h)?,
+    };
     let mask = native(py, || -> crate::Result<Vec<bool>> {
-        let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
-        let bgv = match &bg {
-            Some(b) => Some(DepthView::new(
-                &b.data,
-                b.shape[0],
-                b.shape[1],
-                "background",
-            )?),
-            None => None,
-        };
-        fg_mask(&view, bgv.as_ref(), &cfg)
+        let view = DepthView::new(&d.data, h, w, "depth")?;
+        match &bg {
+            Some(b) => {
+                let bgv = DepthView::new(&b.data, b.shape[0], b.shape[1], "background")?;
+                fg_mask(&view, Some(&bgv), &cfg)
+            }
+            None => {
+                let config = SegmentConfig {
+                    foreground: cfg,
+                    ..Default::default()
+                };
+                Ok(segment_person(&view, &camera, None, &config, None)?.mask)
+            }
+        }
     })?;
     to_numpy(py, mask, &d.shape)
 }

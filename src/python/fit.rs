@@ -52,6 +52,44 @@ pub struct PyFitConfig {
 }
 
 impl PyFitConfig {
+    /// The Python view of a Rust config.
+    pub(crate) fn from_rust(c: &FitConfig) -> Self {
+        let (loss, loss_scale) = match c.em.loss {
+            Loss::Squared => ("squared", DEFAULT_LOSS_SCALE),
+            Loss::Huber(s) => ("huber", s),
+            Loss::Cauchy(s) => ("cauchy", s),
+        };
+        let e = &c.em;
+        PyFitConfig {
+            sigma: e.sigma,
+            loss: loss.to_string(),
+            loss_scale,
+            potts: e.potts,
+            contrast_weight: e.contrast_weight,
+            contrast_sigma: e.contrast_sigma,
+            outlier_distance: e.outlier_distance,
+            outlier_distance_start: e.outlier_distance_start,
+            anneal_iterations: e.anneal_iterations,
+            adaptive_anneal: e.adaptive_anneal,
+            settled_joint_motion: e.settled_joint_motion,
+            truncation_factor: e.truncation_factor,
+            max_iterations: e.max_iterations,
+            label_change_tolerance: e.label_change_tolerance,
+            energy_tolerance: e.energy_tolerance,
+            expansion_cycles: e.expansion_cycles,
+            free_space_weight: e.free_space_weight,
+            free_space_margin: e.free_space_margin,
+            free_space_truncation: e.free_space_truncation,
+            lm_max_iterations: e.lm.max_iterations,
+            connectivity: c.connectivity.neighbours(),
+            stride: c.stride,
+            label_all_pixels: c.label_all_pixels,
+            full_resolution_iterations: c.full_resolution_iterations,
+            recentred_start: c.recentred_start,
+            swapped_limb_starts: c.swapped_limb_starts,
+        }
+    }
+
     pub(crate) fn to_rust(&self) -> crate::Result<FitConfig> {
         self.check_magnitudes()?;
         let loss = match self.loss.as_str() {

@@ -14,6 +14,8 @@ mod convert;
 mod fit;
 mod graphcut;
 mod io;
+mod pipeline;
+mod segment;
 mod stereo;
 mod templates;
 
@@ -190,6 +192,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     fit::register(m)?;
     graphcut::register(m)?;
     io::register(m)?;
+    segment::register(m)?;
+    pipeline::register(m)?;
     stereo::register(m)?;
     templates::register(m)?;
     Ok(())

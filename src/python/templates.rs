@@ -172,7 +172,14 @@ fn surface_context<'py>(
 /// The native template database (see `depthpose.templates.TemplateDatabase`).
 #[pyclass(name = "_TemplateDatabase", module = "depthpose._core", frozen)]
 pub struct PyTemplateDatabase {
-    inner: TemplateDatabase,
+    inner: std::sync::Arc<TemplateDatabase>,
+}
+
+impl PyTemplateDatabase {
+    /// The database, shared (an estimator keeps it without copying it).
+    pub(crate) fn shared(&self) -> std::sync::Arc<TemplateDatabase> {
+        self.inner.clone()
+    }
 }
 
 #[pymethods]
@@ -242,7 +249,9 @@ impl PyTemplateDatabase {
         if let Some(e) = callback_error {
             return Err(e);
         }
-        Ok(PyTemplateDatabase { inner: db })
+        Ok(PyTemplateDatabase {
+            inner: std::sync::Arc::new(db),
+        })
     }
 
     /// A database from template depth images rendered elsewhere: `depths` (768, H, W)
@@ -293,7 +302,9 @@ impl PyTemplateDatabase {
             ));
         }
         let db = native(py, || TemplateDatabase::from_depths(&model, &cfg, &d.data))?;
-        Ok(PyTemplateDatabase { inner: db })
+        Ok(PyTemplateDatabase {
+            inner: std::sync::Arc::new(db),
+        })
     }
 
     /// Depth image (H, W) float32 of template `index` rendered in Rust.
@@ -603,7 +614,9 @@ impl PyTemplateDatabase {
         let db = native(py, || {
             TemplateDatabase::from_arrays(&a, expected.as_ref().map(|(m, c)| (m, c)), &source)
         })?;
-        Ok(PyTemplateDatabase { inner: db })
+        Ok(PyTemplateDatabase {
+            inner: std::sync::Arc::new(db),
+        })
     }
 
     /// The settings hash this database's model and settings give (hex).

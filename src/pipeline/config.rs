@@ -1,0 +1,204 @@
+//! Settings of the estimator and the tracker.
+
+use crate::error::{ensure, Result};
+use crate::fit::FitConfig;
+use crate::segment::SegmentConfig;
+
+/// Settings of [`super::Estimator`] and [`super::Tracker`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PipelineConfig {
+    /// Template candidates taken from the search when estimating from scratch; each also
+    /// gives its left/right-swapped and mirrored-view hypotheses.
+    pub candidates: usize,
+    /// Hypotheses (after ranking all by their depth discrepancy) refined by EM.
+    pub hypotheses: usize,
+    /// EM iterations of each hypothesis before choosing.
+    pub candidate_iterations: usize,
+    /// The best this many candidate fits are refined fully, in parallel, and the best of
+    /// those kept.
+    pub finals: usize,
+    /// EM iterations of each final, the candidate iterations included (None: the fit
+    /// settings' `max_iterations`).
+    pub final_iterations: Option<usize>,
+    /// Pixel stride of the brief candidate fits.
+    pub candidate_stride: usize,
+    /// Pixel stride of the finals' continued EM; the final labels cover every pixel.
+    pub final_stride: usize,
+    /// Tracking: weight of the prior toward the predicted pose.
+    pub prior_weight: f64,
+    /// Tracking: EM iterations per tracked frame.
+    pub track_iterations: usize,
+    /// Tracking: pixel stride of a tracked frame's EM.
+    pub track_stride: usize,
+    /// Tracking: share of the previous velocity carried into the prediction.
+    pub velocity_damping: f64,
+    /// Tracking: a frame is lost when fewer than this share of the foreground points are
+    /// explained by the body, ...
+    pub min_inlier_share: f64,
+    /// ... or its depth discrepancy exceeds this many times the running median of the
+    /// track's recent ones, ...
+    pub lost_ratio: f64,
+    /// ... or this absolute value.
+    pub lost_discrepancy: f64,
+    /// Tracking: every this many frames the template search runs again and the track
+    /// switches when a hypothesis explains the depth clearly better (0 = never).
+    pub recheck_every: usize,
+    /// ... with this many template hypotheses besides the tracked pose and its
+    /// swapped-limbs pose.
+    pub recheck_hypotheses: usize,
+    /// Tracking: template hypotheses refined when the track is lost.
+    pub lost_hypotheses: usize,
+    /// "Clearly better": a lower discrepancy by at least this share.
+    pub switch_margin: f64,
+    /// Weight of the rest-pose term added to the depth discrepancy wherever poses
+    /// compete: `pose_prior_weight` × Σ θ² over the 14 limb angles (radians; 0 is the
+    /// rest pose). Where the depth cannot tell where a limb is (hidden behind the
+    /// torso), it prefers the ordinary pose.
+    pub pose_prior_weight: f64,
+    /// The fits' settings.
+    pub fit: FitConfig,
+    /// Shape calibration: the body shape is fitted once to this many usable frames and
+    /// kept (0 = never).
+    pub calibration_frames: usize,
+    /// ... taking every this many usable frames.
+    pub calibration_every: usize,
+    /// ... with this weight of the prior toward the starting shape.
+    pub calibration_prior_weight: f64,
+    /// ... and at most this many rounds.
+    pub calibration_rounds: usize,
+    /// Person segmentation.
+    pub segment: SegmentConfig,
+    /// The working focal length (pixels): larger images are reduced by the whole factor
+    /// nearest `focal / working_focal`, so that every sensor is processed at about the
+    /// resolution the pipeline is built for (a 320×240 Kinect-like image). Results
+    /// come back in the input's pixel grid and camera frame.
+    pub working_focal: f64,
+}
+
+impl Default for PipelineConfig {
+    fn default() -> Self {
+        PipelineConfig {
+            candidates: 4,
+            hypotheses: 20,
+            candidate_iterations: 2,
+            finals: 3,
+            final_iterations: Some(10),
+            candidate_stride: 2,
+            final_stride: 2,
+            prior_weight: 100.0,
+            track_iterations: 4,
+            track_stride: 2,
+            velocity_damping: 0.5,
+            min_inlier_share: 0.75,
+            lost_ratio: 1.6,
+            lost_discrepancy: 0.5,
+            recheck_every: 8,
+            recheck_hypotheses: 4,
+            lost_hypotheses: 8,
+            switch_margin: 0.1,
+            pose_prior_weight: 0.005,
+            fit: FitConfig::default(),
+            calibration_frames: 8,
+            calibration_every: 1,
+            calibration_prior_weight: 1e5,
+            calibration_rounds: 3,
+            segment: SegmentConfig::default(),
+            working_focal: 300.0,
+        }
+    }
+}
+
+/// The template search returns at most this many candidates.
+pub const MAX_CANDIDATES: usize = 768;
+
+impl PipelineConfig {
+    /// Checks every field; the error names the first nonsensical one.
+    pub fn validate(&self) -> Result<()> {
+        let at_least = |v: usize, low: usize, name: &str| {
+            ensure(v >= low, name, || {
+                format!("expected an integer >= {low}, got {v}")
+            })
+        };
+        at_least(self.candidates, 1, "candidates")?;
+        ensure(self.candidates <= MAX_CANDIDATES, "candidates", || {
+            format!("expected 1..{MAX_CANDIDATES}, got {}", self.candidates)
+        })?;
+        at_least(self.finals, 1, "finals")?;
+        at_least(self.candidate_iterations, 1, "candidate_iterations")?;
+        if let Some(n) = self.final_iterations {
+            at_least(n, 1, "final_iterations")?;
+        }
+        at_least(self.track_iterations, 1, "track_iterations")?;
+        for (v, name) in [
+            (self.track_stride, "track_stride"),
+            (self.candidate_stride, "candidate_stride"),
+            (self.final_stride, "final_stride"),
+        ] {
+            ensure((1..=crate::fit::MAX_STRIDE).contains(&v), name, || {
+                format!("expected 1..{}, got {v}", crate::fit::MAX_STRIDE)
+            })?;
+        }
+        at_least(self.recheck_hypotheses, 1, "recheck_hypotheses")?;
+        at_least(self.lost_hypotheses, 1, "lost_hypotheses")?;
+        at_least(self.calibration_every, 1, "calibration_every")?;
+        at_least(self.calibration_rounds, 1, "calibration_rounds")?;
+        let real = |v: f64, low: f64, high: f64, inf: bool, name: &str| {
+            let ok = (v.is_finite() || (inf && v == f64::INFINITY)) && v >= low && v <= high;
+            ensure(ok, name, || {
+                let what = if inf {
+                    "number (or inf)"
+                } else {
+                    "finite number"
+                };
+                format!("expected a {what} in [{low}, {high}], got {v}")
+            })
+        };
+        real(self.prior_weight, 0.0, f64::INFINITY, false, "prior_weight")?;
+        real(self.velocity_damping, 0.0, 1.0, false, "velocity_damping")?;
+        real(self.min_inlier_share, 0.0, 1.0, false, "min_inlier_share")?;
+        real(self.lost_ratio, 0.0, f64::INFINITY, true, "lost_ratio")?;
+        real(
+            self.lost_discrepancy,
+            0.0,
+            f64::INFINITY,
+            true,
+            "lost_discrepancy",
+        )?;
+        real(self.switch_margin, 0.0, 1.0, false, "switch_margin")?;
+        real(
+            self.pose_prior_weight,
+            0.0,
+            f64::INFINITY,
+            false,
+            "pose_prior_weight",
+        )?;
+        real(
+            self.calibration_prior_weight,
+            0.0,
+            f64::INFINITY,
+            false,
+            "calibration_prior_weight",
+        )?;
+        real(self.working_focal, 1.0, 1e6, false, "working_focal")?;
+        self.fit.validate()?;
+        self.segment.validate()
+    }
+
+    /// The fit settings with another iteration limit, stride and full-pixel labelling.
+    pub(crate) fn fit_with(
+        &self,
+        iterations: Option<usize>,
+        stride: usize,
+        label_all_pixels: Option<bool>,
+    ) -> FitConfig {
+        let mut f = self.fit;
+        if let Some(n) = iterations {
+            f.em.max_iterations = n;
+        }
+        f.stride = stride;
+        if let Some(l) = label_all_pixels {
+            f.label_all_pixels = l;
+        }
+        f
+    }
+}

@@ -1,0 +1,381 @@
+//! Pose from scratch, one frame at a time: the person's pixels, the template search
+//! with its swapped and mirrored hypotheses, brief EM fits of the most promising, full
+//! fits of the best few, and the pose whose body explains the depth best.
+
+use super::confidence::joint_confidence;
+use super::config::PipelineConfig;
+use super::hypotheses::{rest_pose_penalty, template_starts};
+use super::resolution::WorkingResolution;
+use super::result::{Clock, PoseResult, SegmentSummary, Source};
+use crate::body::{BodyModel, Pose};
+use crate::camera::Camera;
+use crate::cloud::DepthView;
+use crate::error::{Error, Result};
+use crate::fit::{FitConfig, FitProblem, FitResult, PosePrior};
+use crate::render::depth_discrepancy;
+use crate::segment::{segment_person, SegmentHint, Segmentation};
+use crate::templates::{MatchConfig, TemplateDatabase};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// The depth difference (m) at which a pixel of the discrepancy counts fully.
+pub const DISCREPANCY_CAP: f64 = 0.1;
+
+/// The short list of the template search's pruning stage.
+const SHORTLIST: usize = 16;
+
+/// Pose from scratch (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Estimator {
+    resolution: WorkingResolution,
+    model: BodyModel,
+    templates: Arc<TemplateDatabase>,
+    config: PipelineConfig,
+    /// The empty scene at the working resolution.
+    background: Option<Vec<f32>>,
+}
+
+/// A frame at the working resolution: its depth, the person's pixels and how they
+/// were found, and the fit problems built on it (one per stride).
+pub struct Frame {
+    pub depth: Vec<f32>,
+    pub mask: Vec<bool>,
+    pub segmentation: Option<Segmentation>,
+    problems: Vec<FitProblem>,
+}
+
+impl Estimator {
+    /// An estimator for images of `camera` (the input's size and intrinsics).
+    /// `background`: the empty scene (metres, the input's size), for background
+    /// subtraction; without it the person is segmented automatically.
+    pub fn new(
+        camera: &Camera,
+        model: BodyModel,
+        templates: Arc<TemplateDatabase>,
+        config: PipelineConfig,
+        background: Option<&[f32]>,
+    ) -> Result<Self> {
+        config.validate()?;
+        let resolution = WorkingResolution::for_camera(camera, config.working_focal)?;
+        let background = match background {
+            Some(b) => {
+                DepthView::new(b, camera.height, camera.width, "background")?;
+                Some(resolution.depth(b).0)
+            }
+            None => None,
+        };
+        Ok(Estimator {
+            resolution,
+            model,
+            templates,
+            config,
+            background,
+        })
+    }
+
+    pub fn model(&self) -> &BodyModel {
+        &self.model
+    }
+
+    pub(crate) fn set_model(&mut self, model: BodyModel) {
+        self.model = model;
+    }
+
+    pub fn config(&self) -> &PipelineConfig {
+        &self.config
+    }
+
+    /// The input camera.
+    pub fn camera(&self) -> &Camera {
+        &self.resolution.input
+    }
+
+    pub fn resolution(&self) -> &WorkingResolution {
+        &self.resolution
+    }
+
+    pub fn templates(&self) -> &Arc<TemplateDatabase> {
+        &self.templates
+    }
+
+    /// The pose of one frame from scratch. `depth`: metres, the input's size;
+    /// `mask`: the person's pixels (else segmented).
+    pub fn estimate(&self, depth: &[f32], mask: Option<&[bool]>) -> Result<PoseResult> {
+        let mut clock = Clock::start();
+        let mut frame = self.prepare(depth, mask, None)?;
+        clock.lap("foreground");
+        let hypotheses = self.config.hypotheses;
+        let (best, score) = self.search(&mut frame, &[], hypotheses, true, Some(&mut clock))?;
+        clock.lap("fit");
+        Ok(self.result(&frame, best, score, Source::Templates, clock))
+    }
+
+    /// The frame at the working resolution with the person's pixels: `mask` (the
+    /// input's size) when given, else the segmentation (with `hint`, a video's last).
+    pub fn prepare(
+        &self,
+        depth: &[f32],
+        mask: Option<&[bool]>,
+        hint: Option<&SegmentHint>,
+    ) -> Result<Frame> {
+        let cam = &self.resolution.input;
+        DepthView::new(depth, cam.height, cam.width, "depth")?;
+        if let Some(m) = mask {
+            if m.len() != depth.len() {
+                return Err(Error::invalid(
+                    "mask",
+                    format!("has {} values for {} pixels", m.len(), depth.len()),
+                ));
+            }
+        }
+        let (work, source) = self.resolution.depth(depth);
+        let camera = &self.resolution.working;
+        let (mask, segmentation) = match mask {
+            Some(m) => (self.resolution.mask(m, &source), None),
+            None => {
+                let view = DepthView::new(&work, camera.height, camera.width, "depth")?;
+                let bg = self
+                    .background
+                    .as_ref()
+                    .map(|b| DepthView::new(b, camera.height, camera.width, "background"))
+                    .transpose()?;
+                let seg = segment_person(&view, camera, bg.as_ref(), &self.config.segment, hint)?;
+                (seg.mask.clone(), Some(seg))
+            }
+        };
+        Ok(Frame {
+            depth: work,
+            mask,
+            segmentation,
+            problems: Vec::new(),
+        })
+    }
+
+    /// The frame's fit problem for `config`'s stride, built on first use.
+    fn problem<'f>(&self, frame: &'f mut Frame, config: &FitConfig) -> Result<&'f mut FitProblem> {
+        let k = match frame
+            .problems
+            .iter()
+            .position(|p| p.config().stride == config.stride)
+        {
+            Some(k) => k,
+            None => {
+                let p = FitProblem::new(
+                    &frame.depth,
+                    &self.resolution.working,
+                    Some(&frame.mask),
+                    config,
+                )?;
+                frame.problems.push(p);
+                frame.problems.len() - 1
+            }
+        };
+        let p = &mut frame.problems[k];
+        p.set_config(config)?;
+        Ok(p)
+    }
+
+    /// EM fits from each of `inits` (with `resume`, each continuing an earlier fit), in
+    /// parallel, with `prior` toward a pose.
+    pub(crate) fn fits(
+        &self,
+        frame: &mut Frame,
+        config: &FitConfig,
+        inits: &[Pose],
+        resume: Option<&[FitResult]>,
+        prior: Option<&PosePrior>,
+    ) -> Result<Vec<FitResult>> {
+        let problem = &*self.problem(frame, config)?;
+        let model = &self.model;
+        inits
+            .par_iter()
+            .enumerate()
+            .map(|(k, init)| problem.fit_from(model, init, resume.map(|r| &r[k]), prior))
+            .collect()
+    }
+
+    /// How badly each of `poses` explains the frame's depth (rendered in parallel).
+    pub(crate) fn discrepancies(&self, frame: &Frame, poses: &[Pose]) -> Result<Vec<f64>> {
+        self.model.depth_discrepancies(
+            poses,
+            &self.resolution.working,
+            &frame.depth,
+            &frame.mask,
+            DISCREPANCY_CAP,
+        )
+    }
+
+    /// How badly each of `poses` explains a prepared frame (see
+    /// [`crate::render::depth_discrepancy`]).
+    pub fn discrepancies_of(&self, frame: &Frame, poses: &[Pose]) -> Result<Vec<f64>> {
+        self.discrepancies(frame, poses)
+    }
+
+    /// [`Self::discrepancies`] plus the rest-pose penalty: how poses compete.
+    fn rankings(&self, scores: &[f64], poses: &[Pose]) -> Vec<f64> {
+        scores
+            .iter()
+            .zip(poses)
+            .map(|(s, p)| s + self.penalty(p))
+            .collect()
+    }
+
+    /// The rest-pose penalty a pose's discrepancy is charged when poses compete.
+    pub fn penalty(&self, pose: &Pose) -> f64 {
+        rest_pose_penalty(pose, self.config.pose_prior_weight)
+    }
+
+    /// Start poses from the template search (see [`template_starts`]).
+    pub(crate) fn template_hypotheses(&self, frame: &Frame) -> Result<Vec<Pose>> {
+        let camera = &self.resolution.working;
+        let view = DepthView::new(&frame.depth, camera.height, camera.width, "depth")?;
+        let config = MatchConfig {
+            top_k: self.config.candidates,
+            shortlist: SHORTLIST.max(self.config.candidates),
+            ..MatchConfig::default()
+        };
+        let found = self
+            .templates
+            .match_depth(&view, camera, Some(&frame.mask), &config)?;
+        if found.candidates.is_empty() {
+            return Err(Error::NoBody(
+                "depth: no template matched the foreground".into(),
+            ));
+        }
+        Ok(template_starts(&self.model, &found.candidates))
+    }
+
+    /// The best fit from the template hypotheses (and `extra` start poses, always
+    /// refined): the best `hypotheses` by their depth discrepancy refined briefly by EM,
+    /// the `finals` explaining the depth best refined fully (their EM continued), the
+    /// best of all kept. Returns the fit and its discrepancy. With `label` the kept
+    /// fit is labelled at every pixel; else it has its EM's labels only
+    /// ([`Self::label_all`] completes it).
+    pub(crate) fn search(
+        &self,
+        frame: &mut Frame,
+        extra: &[Pose],
+        hypotheses: usize,
+        label: bool,
+        clock: Option<&mut Clock>,
+    ) -> Result<(FitResult, f64)> {
+        let cfg = &self.config;
+        let mut starts = self.template_hypotheses(frame)?;
+        if let Some(clock) = clock {
+            clock.lap("templates");
+        }
+        let n = hypotheses.max(1);
+        if n < starts.len() {
+            let scores = self.discrepancies(frame, &starts)?;
+            let order = stable_order(&self.rankings(&scores, &starts));
+            starts = order[..n].iter().map(|&i| starts[i]).collect();
+        }
+        let chosen: Vec<Pose> = extra.iter().chain(&starts).copied().collect();
+        // Candidates continued at their own stride need no labels beyond their EM's.
+        let brief = cfg.candidate_stride == cfg.final_stride;
+        let candidate_config = cfg.fit_with(
+            Some(cfg.candidate_iterations),
+            cfg.candidate_stride,
+            brief.then_some(false),
+        );
+        let fits = self.fits(frame, &candidate_config, &chosen, None, None)?;
+        let poses: Vec<Pose> = fits.iter().map(|f| f.pose).collect();
+        let scores = self.discrepancies(frame, &poses)?;
+        let ranking = self.rankings(&scores, &poses);
+        let order: Vec<usize> = stable_order(&ranking)
+            .into_iter()
+            .take(cfg.finals)
+            .collect();
+        let (mut best, mut best_score) = (fits[order[0]].clone(), scores[order[0]]);
+        let best_rank = ranking[order[0]];
+        // The best candidates' EM goes on where their brief fits stopped.
+        let winners: Vec<FitResult> = order.iter().map(|&i| fits[i].clone()).collect();
+        let winner_poses: Vec<Pose> = winners.iter().map(|f| f.pose).collect();
+        let final_config = cfg.fit_with(cfg.final_iterations, cfg.final_stride, Some(false));
+        let finals = self.fits(frame, &final_config, &winner_poses, Some(&winners), None)?;
+        let poses: Vec<Pose> = finals.iter().map(|f| f.pose).collect();
+        let final_scores = self.discrepancies(frame, &poses)?;
+        let final_ranking = self.rankings(&final_scores, &poses);
+        let k = first_min(&final_ranking);
+        // (A brief candidate's labels cover only its own pixels: a final is kept then.)
+        if brief || final_ranking[k] <= best_rank {
+            best_score = final_scores[k];
+            best = finals.into_iter().nth(k).expect("k indexes the finals");
+            if label {
+                best = self.label_all(frame, best)?;
+            }
+        }
+        Ok((best, best_score))
+    }
+
+    /// `fit`, a final of [`Self::search`], labelled at every pixel.
+    pub(crate) fn label_all(&self, frame: &mut Frame, fit: FitResult) -> Result<FitResult> {
+        let config = self.config.fit_with(None, self.config.final_stride, None);
+        if !config.label_all_pixels {
+            return Ok(fit);
+        }
+        let problem = self.problem(frame, &config)?;
+        problem.label_all(&self.model, &fit, None)
+    }
+
+    /// The result of a frame: the fit's pose, its labels and the person's pixels at the
+    /// input's size, the joints' confidence.
+    pub(crate) fn result(
+        &self,
+        frame: &Frame,
+        fit: FitResult,
+        discrepancy: f64,
+        source: Source,
+        clock: Clock,
+    ) -> PoseResult {
+        let camera = &self.resolution.working;
+        let (_, rendered) = self.model.render_depth(&fit.pose, camera);
+        let confidence = joint_confidence(&fit.joints, &fit.labels, &rendered, camera);
+        let labels = self.resolution.upsample(&fit.labels, -1);
+        let mask = self.resolution.upsample(&frame.mask, false);
+        PoseResult {
+            pose: fit.pose,
+            joints: fit.joints,
+            shape: self.model.shape,
+            labels,
+            mask,
+            energy: fit.energy,
+            iterations: fit.iterations,
+            converged: fit.converged(),
+            confidence,
+            timings: clock.finish(),
+            source,
+            discrepancy,
+            segmentation: frame.segmentation.as_ref().map(|s| SegmentSummary {
+                method: s.method,
+                planes: s.planes.clone(),
+                person: s.person,
+                others: s.others.clone(),
+            }),
+        }
+    }
+
+    /// The discrepancy of one pose, from one rendering.
+    pub(crate) fn discrepancy(&self, frame: &Frame, pose: &Pose) -> f64 {
+        let (rendered, _) = self.model.render_depth(pose, &self.resolution.working);
+        depth_discrepancy(&rendered, &frame.depth, &frame.mask, DISCREPANCY_CAP)
+    }
+}
+
+/// Indices sorting `values` ascending; equal values keep their order.
+pub(crate) fn stable_order(values: &[f64]) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    order
+}
+
+/// The index of the first smallest value.
+fn first_min(values: &[f64]) -> usize {
+    let mut k = 0;
+    for (i, v) in values.iter().enumerate() {
+        if *v < values[k] {
+            k = i;
+        }
+    }
+    k
+}

@@ -1,0 +1,144 @@
+//! Start poses from the template search, and the ambiguities of a depth image that
+//! every search has to try both ways: left and right limbs, a view and its mirror image.
+//!
+//! Pose layout ([`crate::body::PARAM_NAMES`]): 0..3 root translation, 3..6 root rotation
+//! vector, 6 neck flexion, 7 neck lateral bend, 8..12 right shoulder (3) and elbow,
+//! 12..16 the same on the left, 16..19 right hip (2) and knee, 19..22 the same on the
+//! left. The joint angles are anatomical (the same motion on both sides), so exchanging
+//! the right and left blocks and negating the lateral neck bend mirrors the body in its
+//! own sagittal plane.
+
+use crate::body::{BodyModel, Pose, NUM_PARAMS};
+use crate::templates::Candidate;
+
+/// The neck's lateral bend.
+const NECK_LATERAL: usize = 7;
+/// The limb angles: shoulders (3 each), elbows, hips (2 each), knees.
+pub const LIMB_ANGLES: std::ops::Range<usize> = 8..NUM_PARAMS;
+/// Right arm, left arm, right leg, left leg.
+const R_ARM: usize = 8;
+const L_ARM: usize = 12;
+const ARM: usize = 4;
+const R_LEG: usize = 16;
+const L_LEG: usize = 19;
+const LEG: usize = 3;
+
+/// Two hypotheses whose joints are within this mean distance (m) are one.
+const DUPLICATE_DISTANCE: f64 = 0.03;
+
+/// The left/right-swapped pose: the body mirrored in its own sagittal plane (right and
+/// left limb angles exchanged, lateral neck bend negated), root unchanged. In a side
+/// view this puts the far leg where the near one was. An involution.
+pub fn swap_limbs(pose: &Pose) -> Pose {
+    let mut out = *pose;
+    out[R_ARM..R_ARM + ARM].copy_from_slice(&pose[L_ARM..L_ARM + ARM]);
+    out[L_ARM..L_ARM + ARM].copy_from_slice(&pose[R_ARM..R_ARM + ARM]);
+    out[R_LEG..R_LEG + LEG].copy_from_slice(&pose[L_LEG..L_LEG + LEG]);
+    out[L_LEG..L_LEG + LEG].copy_from_slice(&pose[R_LEG..R_LEG + LEG]);
+    out[NECK_LATERAL] = -pose[NECK_LATERAL];
+    out
+}
+
+/// The mirror image of the posed body in the camera's vertical plane through the hip
+/// centre (x → −x about the hip centre): the same silhouette flipped left-right, limbs
+/// swapped so that the body stays a right-handed one. With F = diag(−1, 1, 1), the root
+/// rotation R becomes F·R·F, whose rotation vector is (v_x, −v_y, −v_z). An involution.
+pub fn mirror_view(pose: &Pose) -> Pose {
+    let mut out = swap_limbs(pose);
+    out[4] = -out[4];
+    out[5] = -out[5];
+    out
+}
+
+/// `weight` × Σ θ² over the 14 limb angles (radians; 0 is the rest pose: arms hanging,
+/// legs straight): a pose's distance from the ordinary, added to its depth discrepancy
+/// where poses compete.
+pub fn rest_pose_penalty(pose: &Pose, weight: f64) -> f64 {
+    weight * pose[LIMB_ANGLES].iter().map(|v| v * v).sum::<f64>()
+}
+
+/// Start poses from template candidates: each candidate's pose, its left/right-swapped
+/// pose and the mirror images of both (the search cannot tell a side view's near limbs
+/// from its far ones, nor a view from its mirror image), near-duplicates dropped.
+pub fn template_starts(model: &BodyModel, candidates: &[Candidate]) -> Vec<Pose> {
+    let mut out: Vec<Pose> = Vec::with_capacity(4 * candidates.len());
+    let mut kept: Vec<[nalgebra::Vector3<f64>; crate::body::NUM_JOINTS]> = Vec::new();
+    for c in candidates {
+        let p = c.pose;
+        let s = swap_limbs(&p);
+        for q in [p, s, mirror_view(&p), mirror_view(&s)] {
+            let j = model.joints(&q);
+            let duplicate = kept.iter().any(|k| {
+                let mean =
+                    k.iter().zip(&j).map(|(a, b)| (a - b).norm()).sum::<f64>() / j.len() as f64;
+                mean < DUPLICATE_DISTANCE
+            });
+            if !duplicate {
+                kept.push(j);
+                out.push(q);
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::BodyModel;
+    use nalgebra::{Rotation3, Vector3};
+
+    fn pose() -> Pose {
+        let mut p = BodyModel::neutral_pose();
+        p[3..6].copy_from_slice(&[0.2, 0.7, -0.3]);
+        for (k, v) in p.iter_mut().enumerate().skip(6) {
+            *v += 0.05 * k as f64;
+        }
+        p
+    }
+
+    #[test]
+    fn swap_and_mirror_are_involutions() {
+        let p = pose();
+        assert_eq!(swap_limbs(&swap_limbs(&p)), p);
+        assert_eq!(mirror_view(&mirror_view(&p)), p);
+    }
+
+    #[test]
+    fn the_mirror_image_mirrors_the_joints() {
+        let model = BodyModel::new(1.75).unwrap();
+        let p = pose();
+        let (j, m) = (model.joints(&p), model.joints(&mirror_view(&p)));
+        let hip_x = p[0];
+        // Joint k of the mirror image is the mirrored joint of k's other side.
+        let other = [0, 1, 3, 2, 5, 4, 7, 6, 8, 10, 9, 12, 11, 14, 13];
+        for k in 0..j.len() {
+            let a = m[k];
+            let b = j[other[k]];
+            let want = Vector3::new(2.0 * hip_x - b.x, b.y, b.z);
+            assert!((a - want).norm() < 1e-9, "joint {k}: {a} vs {want}");
+        }
+    }
+
+    #[test]
+    fn the_mirrored_rotation_is_f_r_f() {
+        let v = Vector3::new(0.3, -1.2, 0.8);
+        let f = nalgebra::Matrix3::from_diagonal(&Vector3::new(-1.0, 1.0, 1.0));
+        let r = Rotation3::from_scaled_axis(v).into_inner();
+        let mut p = [0.0; NUM_PARAMS];
+        p[3..6].copy_from_slice(v.as_slice());
+        let m = mirror_view(&p);
+        let got = Rotation3::from_scaled_axis(Vector3::new(m[3], m[4], m[5])).into_inner();
+        assert!((got - f * r * f).norm() < 1e-12);
+    }
+
+    #[test]
+    fn the_penalty_sums_the_limb_angles() {
+        let mut p = [0.0; NUM_PARAMS];
+        p[0] = 5.0; // the root does not count
+        p[6] = 1.0; // nor the neck
+        p[8] = 0.5;
+        p[21] = -2.0;
+        assert!((rest_pose_penalty(&p, 0.1) - 0.1 * (0.25 + 4.0)).abs() < 1e-15);
+    }
+}

@@ -1,0 +1,193 @@
+//! The estimator and the tracker on scenes rendered from the body model: a room (floor
+//! and back wall) with the body standing in it.
+
+use super::*;
+use crate::body::{BodyModel, Pose};
+use crate::camera::Camera;
+use crate::templates::{TemplateConfig, TemplateDatabase};
+use std::sync::{Arc, OnceLock};
+
+/// The default template database, built once per test run.
+pub(crate) fn default_templates() -> Arc<TemplateDatabase> {
+    static DB: OnceLock<Arc<TemplateDatabase>> = OnceLock::new();
+    DB.get_or_init(|| {
+        Arc::new(
+            TemplateDatabase::build(&BodyModel::default(), &TemplateConfig::default()).unwrap(),
+        )
+    })
+    .clone()
+}
+
+/// The floor 1 m below the camera and a wall 5 m away, seen by the ITOP camera.
+fn room(camera: &Camera) -> Vec<f32> {
+    let mut out = vec![0.0f32; camera.width * camera.height];
+    for row in 0..camera.height {
+        for col in 0..camera.width {
+            let ry = (row as f64 - camera.cy) / camera.fy;
+            let mut z = 5.0f64;
+            if ry > 0.0 {
+                z = z.min(1.0 / ry);
+            }
+            out[row * camera.width + col] = z as f32;
+        }
+    }
+    out
+}
+
+/// A walking pose at phase `t` (radians), standing on the floor 3 m away.
+fn walking(model: &BodyModel, t: f64) -> Pose {
+    let mut p = BodyModel::neutral_pose();
+    p[2] = 3.0;
+    p[16] = 0.4 * t.sin(); // right hip flexion
+    p[19] = -0.4 * t.sin();
+    p[18] = 0.1 + 0.5 * (t + 0.8).sin().max(0.0); // right knee
+    p[21] = 0.1 + 0.5 * (-(t + 0.8).sin()).max(0.0);
+    p[8] = -0.3 * t.sin(); // right shoulder flexion
+    p[12] = 0.3 * t.sin();
+    let lowest = model
+        .joints(&p)
+        .iter()
+        .map(|j| j[1])
+        .fold(f64::MIN, f64::max);
+    p[1] = 1.0 - lowest - 0.08;
+    p
+}
+
+/// The room with the body rendered into it at walking phase `t`: the camera, the depth
+/// image and the pose.
+pub(crate) fn room_with_body(t: f64) -> (Camera, Vec<f32>, Pose) {
+    let camera = Camera::itop();
+    let model = BodyModel::default();
+    let pose = walking(&model, t);
+    let mut scene = room(&camera);
+    let (body, _) = model.render_depth(&pose, &camera);
+    for (s, &b) in scene.iter_mut().zip(&body) {
+        if b > 0.0 && b < *s {
+            *s = b;
+        }
+    }
+    (camera, scene, pose)
+}
+
+fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {
+    let truth = BodyModel::default().joints(pose);
+    a.joints
+        .iter()
+        .zip(&truth)
+        .map(|(p, q)| (p - q).norm())
+        .sum::<f64>()
+        / truth.len() as f64
+}
+
+fn estimator(camera: &Camera, config: PipelineConfig) -> Estimator {
+    Estimator::new(
+        camera,
+        BodyModel::default(),
+        default_templates(),
+        config,
+        None,
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_estimator_finds_a_body_in_a_room_without_a_background() {
+    let (camera, depth, pose) = room_with_body(0.6);
+    let est = estimator(&camera, PipelineConfig::default());
+    let r = crate::pool::on_worker(|| est.estimate(&depth, None)).unwrap();
+    let err = mean_joint_error(&r, &pose);
+    assert!(err < 0.05, "mean joint error {err}");
+    assert_eq!(r.source, Source::Templates);
+    assert!(r.discrepancy < 0.2, "{}", r.discrepancy);
+    let seg = r.segmentation.as_ref().unwrap();
+    assert_eq!(seg.method, crate::segment::Method::Planes);
+    assert_eq!(seg.planes.len(), 2);
+    assert_eq!(r.labels.len(), depth.len());
+    for stage in ["foreground", "templates", "fit"] {
+        assert!(r.timings.get(stage).is_some(), "{stage}");
+    }
+    let sum: f64 = r.timings.stages.iter().map(|s| s.1).sum();
+    assert!(r.timings.total >= sum);
+}
+
+#[test]
+fn the_tracker_follows_a_walk() {
+    let camera = Camera::itop();
+    let config = PipelineConfig {
+        calibration_frames: 0,
+        ..PipelineConfig::default()
+    };
+    let mut tracker = Tracker::new(estimator(&camera, config), false);
+    let mut sources = Vec::new();
+    for k in 0..8 {
+        let (_, depth, pose) = room_with_body(0.3 * k as f64);
+        let r = crate::pool::on_worker(|| tracker.update(&depth, None)).unwrap();
+        let err = mean_joint_error(&r, &pose);
+        assert!(err < 0.06, "frame {k}: mean joint error {err}");
+        sources.push(r.source);
+    }
+    assert_eq!(sources[0], Source::Templates);
+    assert!(
+        sources[1..]
+            .iter()
+            .filter(|&&s| s == Source::Tracking)
+            .count()
+            >= 5
+    );
+}
+
+#[test]
+fn a_large_image_runs_at_the_working_resolution_and_answers_at_its_own() {
+    // The same scene seen by a 640×480 camera of twice the focal length.
+    let small = Camera::itop();
+    let large = Camera::new(
+        2.0 * small.fx,
+        2.0 * small.fy,
+        2.0 * (small.cx + 0.5) - 0.5,
+        2.0 * (small.cy + 0.5) - 0.5,
+        640,
+        480,
+    )
+    .unwrap();
+    let model = BodyModel::default();
+    let pose = walking(&model, 0.6);
+    let mut scene = room(&large);
+    let (body, _) = model.render_depth(&pose, &large);
+    for (s, &b) in scene.iter_mut().zip(&body) {
+        if b > 0.0 && b < *s {
+            *s = b;
+        }
+    }
+    let est = estimator(&large, PipelineConfig::default());
+    assert_eq!(est.resolution().factor, 2);
+    let r = crate::pool::on_worker(|| est.estimate(&scene, None)).unwrap();
+    assert!(mean_joint_error(&r, &pose) < 0.05);
+    assert_eq!(r.labels.len(), 640 * 480);
+    // The labels lie on the body at the input's resolution.
+    let on_body = r
+        .labels
+        .iter()
+        .zip(&body)
+        .filter(|(&l, _)| l >= 0)
+        .filter(|(_, &b)| b > 0.0)
+        .count();
+    let labelled = r.labels.iter().filter(|&&l| l >= 0).count();
+    assert!(on_body as f64 > 0.95 * labelled as f64);
+}
+
+#[test]
+fn a_bad_config_is_refused_naming_the_field() {
+    let config = PipelineConfig {
+        finals: 0,
+        ..PipelineConfig::default()
+    };
+    let err = Estimator::new(
+        &Camera::itop(),
+        BodyModel::default(),
+        default_templates(),
+        config,
+        None,
+    )
+    .unwrap_err();
+    assert!(err.to_string().starts_with("finals:"), "{err}");
+}

@@ -1,0 +1,399 @@
+//! Pose through a depth video: each frame starts from the previous pose.
+//!
+//! A tracked frame starts from the previous pose extrapolated by a damped
+//! constant-velocity model, with a prior toward that prediction. The track is lost when
+//! the fitted body explains too little of the person or the depth much worse than
+//! lately; a lost frame runs the template search (with the tracked pose and its
+//! swapped-limbs pose among the starts) and keeps its best. Every few frames the search
+//! also runs on a tracked frame, and the track switches when a hypothesis explains the
+//! depth clearly better.
+//!
+//! **Shape calibration.** Unless told the shape, the tracker collects usable frames (any
+//! but a track's first whose fit explains enough of the person) and, once it has
+//! enough, fits the body shape to them all together ([`crate::fit::fit_shape`]); it
+//! tracks with that shape from then on. A calibration that fails leaves the shape as it
+//! was and is not retried.
+
+use super::estimator::{Estimator, Frame};
+use super::hypotheses::swap_limbs;
+use super::result::{Clock, PoseResult, Source};
+use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
+use crate::error::{Error, Result};
+use crate::fit::{fit_shape, PosePrior, ShapeConfig, ShapeFrame, ShapeResult};
+use crate::segment::SegmentHint;
+use std::collections::VecDeque;
+use std::time::Instant;
+
+/// Recent discrepancies kept for the lost-track test.
+const RECENT: usize = 15;
+/// The lost-track test compares with the median once this many are known.
+const RECENT_MIN: usize = 3;
+
+/// The motion state of a track.
+#[derive(Debug, Clone, Default)]
+struct Track {
+    previous: Option<Pose>,
+    before: Option<Pose>,
+    recent: VecDeque<f64>,
+    since_check: usize,
+    hint: Option<SegmentHint>,
+}
+
+/// What the shape calibration has collected and found.
+#[derive(Debug, Clone, Default)]
+pub struct Calibration {
+    /// Frames kept for it: depth and mask at the working resolution, pose.
+    buffer: Vec<(Vec<f32>, Vec<bool>, Pose)>,
+    seen: usize,
+    /// The fitted shape, when it ran and succeeded.
+    pub result: Option<ShapeResult>,
+    /// Why it failed, when it did.
+    pub error: Option<String>,
+    /// The number of frames `update` had been given when it ran.
+    pub frame: Option<usize>,
+}
+
+/// Pose through a depth video (see the module docs).
+#[derive(Debug, Clone)]
+pub struct Tracker {
+    estimator: Estimator,
+    base_model: BodyModel,
+    calibrate: bool,
+    track: Track,
+    calibration: Calibration,
+    frames: usize,
+    /// Frames whose track was lost.
+    pub lost_frames: usize,
+    /// Frames where the track switched to a search's result.
+    pub switches: usize,
+}
+
+impl Tracker {
+    /// A tracker over `estimator`'s camera and settings. `calibrate`: fit the body shape
+    /// over the first frames (when `config.calibration_frames > 0`).
+    pub fn new(estimator: Estimator, calibrate: bool) -> Self {
+        let base_model = estimator.model().clone();
+        Tracker {
+            estimator,
+            base_model,
+            calibrate,
+            track: Track::default(),
+            calibration: Calibration::default(),
+            frames: 0,
+            lost_frames: 0,
+            switches: 0,
+        }
+    }
+
+    pub fn estimator(&self) -> &Estimator {
+        &self.estimator
+    }
+
+    /// The model the tracker started with.
+    pub fn base_model(&self) -> &BodyModel {
+        &self.base_model
+    }
+
+    /// The model it tracks with (the calibrated one once calibrated).
+    pub fn model(&self) -> &BodyModel {
+        self.estimator.model()
+    }
+
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    /// Whether the tracker is still collecting frames to calibrate the shape.
+    pub fn calibrating(&self) -> bool {
+        self.calibrate
+            && self.estimator.config().calibration_frames > 0
+            && self.calibration.result.is_none()
+            && self.calibration.error.is_none()
+    }
+
+    /// The calibrated shape factors relative to the base model (None before).
+    pub fn shape_factors(&self) -> Option<[f64; NUM_SHAPE_FACTORS]> {
+        self.calibration.result.as_ref().map(|r| r.factors)
+    }
+
+    /// Forgets the track. The calibrated shape is kept (the same subject) unless
+    /// `shape`: then the starting model is restored and calibrated again.
+    pub fn reset(&mut self, shape: bool) {
+        self.track = Track::default();
+        self.lost_frames = 0;
+        self.switches = 0;
+        if shape {
+            self.calibration = Calibration::default();
+            self.estimator.set_model(self.base_model.clone());
+            self.frames = 0;
+        }
+    }
+
+    /// Starts the track from a known pose: the next update refines it instead of
+    /// searching the templates.
+    pub fn start_from(&mut self, pose: &Pose) -> Result<()> {
+        if let Some(i) = pose.iter().position(|v| !v.is_finite()) {
+            return Err(Error::invalid(
+                "pose",
+                format!("value {i} is not finite ({})", pose[i]),
+            ));
+        }
+        self.reset(false);
+        self.track.previous = Some(*pose);
+        Ok(())
+    }
+
+    /// The pose of the next frame (`depth` metres, the input's size; `mask` the
+    /// person's pixels, else segmented).
+    pub fn update(&mut self, depth: &[f32], mask: Option<&[bool]>) -> Result<PoseResult> {
+        let first = self.track.previous.is_none();
+        let (res, frame, switched) = match self.track.previous {
+            None => {
+                let mut clock = Clock::start();
+                let mut frame = self.estimator.prepare(depth, mask, None)?;
+                clock.lap("foreground");
+                let n = self.estimator.config().hypotheses;
+                let (best, score) =
+                    self.estimator
+                        .search(&mut frame, &[], n, true, Some(&mut clock))?;
+                clock.lap("fit");
+                let res = self
+                    .estimator
+                    .result(&frame, best, score, Source::Templates, clock);
+                (res, frame, true)
+            }
+            Some(_) => self.tracked(depth, mask)?,
+        };
+        self.frames += 1;
+        self.track.hint = frame.segmentation.as_ref().map(|s| s.hint());
+        if switched {
+            self.switches += usize::from(!first);
+            self.track.before = None;
+            self.track.recent.clear();
+        } else {
+            self.track.before = self.track.previous;
+        }
+        self.track.previous = Some(res.pose);
+        if res.discrepancy.is_finite() {
+            if self.track.recent.len() == RECENT {
+                self.track.recent.pop_front();
+            }
+            self.track.recent.push_back(res.discrepancy);
+        }
+        let mut res = res;
+        if self.calibrating() && !first && self.explains_enough(&frame, &res) {
+            self.collect(frame, &mut res);
+        }
+        Ok(res)
+    }
+
+    /// A frame tracked from the previous pose; the search runs when the track is lost
+    /// or a re-check is due. Returns the result, the frame and whether it switched.
+    fn tracked(
+        &mut self,
+        depth: &[f32],
+        mask: Option<&[bool]>,
+    ) -> Result<(PoseResult, Frame, bool)> {
+        let est = &self.estimator;
+        let cfg = est.config().clone();
+        let mut clock = Clock::start();
+        let mut frame = est.prepare(depth, mask, self.track.hint.as_ref())?;
+        clock.lap("foreground");
+        let pred = self.predict();
+        let prior = PosePrior::uniform(pred, cfg.prior_weight, cfg.prior_weight);
+        let fit_config = cfg.fit_with(Some(cfg.track_iterations), cfg.track_stride, None);
+        let fit = est
+            .fits(&mut frame, &fit_config, &[pred], None, Some(&prior))?
+            .pop()
+            .expect("one fit");
+        let score = est.discrepancy(&frame, &fit.pose);
+        clock.lap("fit");
+        let lost = self.lost(&frame, &fit.labels, score);
+        self.track.since_check += 1;
+        let recheck = cfg.recheck_every > 0 && self.track.since_check >= cfg.recheck_every;
+        if !(lost || recheck) {
+            let res = est.result(&frame, fit, score, Source::Tracking, clock);
+            return Ok((res, frame, false));
+        }
+        self.track.since_check = 0;
+        if lost {
+            self.lost_frames += 1;
+        }
+        let pose = fit.pose;
+        let n = if lost {
+            cfg.lost_hypotheses
+        } else {
+            cfg.recheck_hypotheses
+        };
+        let (best, best_score) =
+            est.search(&mut frame, &[pose, swap_limbs(&pose)], n, false, None)?;
+        let margin = if lost { 0.0 } else { cfg.switch_margin };
+        let rank_best = best_score + est.penalty(&best.pose);
+        let rank_track = score + est.penalty(&pose);
+        let switch = rank_best < rank_track * (1.0 - margin);
+        if switch {
+            let best = est.label_all(&mut frame, best)?;
+            clock.lap("search");
+            let res = est.result(&frame, best, best_score, Source::Templates, clock);
+            Ok((res, frame, true))
+        } else {
+            clock.lap("search");
+            let res = est.result(&frame, fit, score, Source::Tracking, clock);
+            Ok((res, frame, false))
+        }
+    }
+
+    /// The previous pose moved on by the damped velocity, within the joint limits.
+    fn predict(&self) -> Pose {
+        let prev = self.track.previous.expect("a track");
+        let Some(before) = self.track.before else {
+            return prev;
+        };
+        let damping = self.estimator.config().velocity_damping;
+        let pred: Pose = std::array::from_fn(|i| prev[i] + damping * (prev[i] - before[i]));
+        BodyModel::clamp_pose(&pred)
+    }
+
+    /// At least `min_inlier_share` of the person's pixels labelled as body.
+    fn explains_enough_labels(&self, frame: &Frame, labels: &[i16]) -> bool {
+        let n = frame.mask.iter().filter(|&&m| m).count();
+        let inliers = labels.iter().filter(|&&l| l >= 0).count();
+        n > 0 && inliers as f64 >= self.estimator.config().min_inlier_share * n as f64
+    }
+
+    fn explains_enough(&self, frame: &Frame, res: &PoseResult) -> bool {
+        // The result's labels are at the input's size; count at the working size.
+        let r = self.estimator.resolution();
+        if r.factor == 1 {
+            return self.explains_enough_labels(frame, &res.labels);
+        }
+        let (f, w) = (r.factor, r.input.width);
+        let ww = r.working.width;
+        let labels: Vec<i16> = (0..frame.mask.len())
+            .map(|k| res.labels[(k / ww) * f * w + (k % ww) * f])
+            .collect();
+        self.explains_enough_labels(frame, &labels)
+    }
+
+    fn lost(&self, frame: &Frame, labels: &[i16], score: f64) -> bool {
+        let cfg = self.estimator.config();
+        if !self.explains_enough_labels(frame, labels) || score > cfg.lost_discrepancy {
+            return true;
+        }
+        let recent = &self.track.recent;
+        if recent.len() >= RECENT_MIN {
+            let mut sorted: Vec<f64> = recent.iter().copied().collect();
+            sorted.sort_by(f64::total_cmp);
+            let m = sorted.len();
+            let median = if m % 2 == 1 {
+                sorted[m / 2]
+            } else {
+                0.5 * (sorted[m / 2 - 1] + sorted[m / 2])
+            };
+            return score > cfg.lost_ratio * median;
+        }
+        false
+    }
+
+    /// Keeps a usable frame for the shape calibration; runs it when there are enough.
+    fn collect(&mut self, frame: Frame, res: &mut PoseResult) {
+        let cfg = self.estimator.config().clone();
+        let c = &mut self.calibration;
+        c.seen += 1;
+        if !(c.seen - 1).is_multiple_of(cfg.calibration_every) {
+            return;
+        }
+        c.buffer.push((frame.depth, frame.mask, res.pose));
+        if c.buffer.len() < cfg.calibration_frames {
+            return;
+        }
+        let start = Instant::now();
+        let buffer = std::mem::take(&mut c.buffer);
+        c.frame = Some(self.frames);
+        let frames: Vec<ShapeFrame> = buffer
+            .iter()
+            .map(|(d, m, _)| ShapeFrame {
+                depth: d,
+                mask: Some(m),
+            })
+            .collect();
+        let poses: Vec<Pose> = buffer.iter().map(|b| b.2).collect();
+        let shape_config = ShapeConfig {
+            fit: cfg.fit,
+            rounds: cfg.calibration_rounds,
+            prior_weight: cfg.calibration_prior_weight,
+            ..ShapeConfig::default()
+        };
+        let camera = self.estimator.resolution().working;
+        let outcome = fit_shape(&frames, &camera, &self.base_model, &poses, &shape_config);
+        self.finish_calibration(outcome);
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        res.timings.stages.push(("calibration", ms));
+        res.timings.total += ms;
+    }
+}
+
+impl Tracker {
+    /// Takes the calibration's outcome: a fitted shape is tracked with from now on (from
+    /// this frame's pose under it; the velocity and the discrepancy history belong to
+    /// the old shape); a failure is recorded and the model kept. Either way the
+    /// calibration does not run again until `reset(true)`.
+    fn finish_calibration(&mut self, outcome: Result<ShapeResult>) {
+        match outcome {
+            Err(e) => self.calibration.error = Some(error_text(&e)),
+            Ok(r) => {
+                self.estimator.set_model(r.model.clone());
+                self.track.previous = r.poses.last().copied();
+                self.track.before = None;
+                self.track.recent.clear();
+                self.calibration.result = Some(r);
+            }
+        }
+    }
+}
+
+/// An error as "Kind: message", the kind named as Python names it.
+fn error_text(e: &Error) -> String {
+    let kind = match e {
+        Error::InvalidArgument { .. } => "InvalidInputError",
+        Error::File { .. } => "FileFormatError",
+        Error::NoBody(_) => "NoBodyError",
+        Error::NotFound { .. } => "MissingFileError",
+        Error::ResourceLimit { .. } => "ResourceLimitError",
+    };
+    format!("{kind}: {e}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::tests::{default_templates, room_with_body};
+    use super::*;
+    use crate::pipeline::PipelineConfig;
+
+    #[test]
+    fn a_failed_calibration_keeps_the_model_and_is_not_retried() {
+        let (camera, _, _) = room_with_body(0.0);
+        let est = Estimator::new(
+            &camera,
+            BodyModel::new(1.75).unwrap(),
+            default_templates(),
+            PipelineConfig::default(),
+            None,
+        )
+        .unwrap();
+        let mut tracker = Tracker::new(est, true);
+        let base = tracker.model().clone();
+        assert!(tracker.calibrating());
+        tracker.finish_calibration(Err(Error::NoBody("frame 0: 3 points".into())));
+        assert!(!tracker.calibrating());
+        assert_eq!(tracker.model(), &base);
+        assert!(tracker.shape_factors().is_none());
+        assert_eq!(
+            tracker.calibration().error.as_deref(),
+            Some("NoBodyError: frame 0: 3 points")
+        );
+        // reset(true) calibrates again.
+        tracker.reset(true);
+        assert!(tracker.calibrating());
+    }
+}

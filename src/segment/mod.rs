@@ -1,0 +1,350 @@
+//! Person segmentation: which pixels of a depth image are the person, with or without a
+//! frame of the empty scene.
+//!
+//! With a background frame, the person is what lies clearly in front of it
+//! ([`crate::cloud::foreground_mask`]). Without one — the usual case — the scene's
+//! support planes (floor, walls) are found and removed ([`planes`]), what remains is
+//! split into depth-continuous clusters, and the person is the cluster that looks most
+//! like one in metric terms ([`clusters`]); in a video the previous frame's planes are
+//! reused and the previous person is followed. The result says which method found the
+//! person, which planes were removed and which other person-like clusters were seen.
+
+pub mod clusters;
+pub mod planes;
+
+#[cfg(test)]
+mod tests;
+
+use crate::camera::Camera;
+use crate::cloud::foreground::{fill_dropouts, Components, DROPOUT_FILL_PASSES};
+use crate::cloud::{foreground_mask, DepthView, ForegroundConfig};
+use crate::error::{ensure, Error, Result};
+pub use clusters::{Cluster, PersonPrior};
+use nalgebra::Vector3;
+use planes::Rays;
+pub use planes::{Plane, PlaneConfig};
+
+/// Settings of [`segment_person`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SegmentConfig {
+    /// Depth range, background tolerance, depth continuity, speckle size and attachment
+    /// of pieces (shared with background subtraction).
+    pub foreground: ForegroundConfig,
+    /// Support-plane detection.
+    pub planes: PlaneConfig,
+    /// What a person looks like.
+    pub person: PersonPrior,
+}
+
+impl SegmentConfig {
+    pub fn validate(&self) -> Result<()> {
+        self.foreground.validate()?;
+        let p = &self.planes;
+        ensure(p.samples >= 3, "planes.samples", || {
+            format!("must be >= 3, got {}", p.samples)
+        })?;
+        ensure(p.iterations <= 100_000, "planes.iterations", || {
+            format!("must be <= 100000, got {}", p.iterations)
+        })?;
+        for (v, n) in [
+            (p.local_radius, "planes.local_radius"),
+            (p.min_area, "planes.min_area"),
+            (p.tolerance, "planes.tolerance"),
+            (p.tolerance_quadratic, "planes.tolerance_quadratic"),
+        ] {
+            ensure(v.is_finite() && v >= 0.0, n, || {
+                format!("must be >= 0, got {v}")
+            })?;
+        }
+        let q = &self.person;
+        for (v, n) in [
+            (q.min_area, "person.min_area"),
+            (q.max_area, "person.max_area"),
+            (q.min_extent, "person.min_extent"),
+            (q.max_extent, "person.max_extent"),
+            (q.min_height, "person.min_height"),
+            (q.full_extent, "person.full_extent"),
+            (q.comparable, "person.comparable"),
+            (q.continuity, "person.continuity"),
+            (q.piece_share, "person.piece_share"),
+        ] {
+            ensure(v.is_finite() && v >= 0.0, n, || {
+                format!("must be >= 0, got {v}")
+            })?;
+        }
+        ensure(q.full_extent > 0.0, "person.full_extent", || {
+            "must be > 0".into()
+        })
+    }
+}
+
+/// How the person's pixels were found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// Subtraction of a frame of the empty scene.
+    Background,
+    /// Support planes removed, the most person-like cluster kept.
+    Planes,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Background => "background",
+            Method::Planes => "planes",
+        }
+    }
+}
+
+/// What a video's previous frame tells the next segmentation.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SegmentHint {
+    /// The support planes found last (tried first).
+    pub planes: Vec<Plane>,
+    /// The person's centroid last (camera frame, m).
+    pub centroid: Option<[f32; 3]>,
+}
+
+/// The person's pixels and how they were found.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Segmentation {
+    /// Row-major, the depth image's size.
+    pub mask: Vec<bool>,
+    pub method: Method,
+    /// The support planes removed (none with a background frame).
+    pub planes: Vec<Plane>,
+    /// The person (all of its pieces together).
+    pub person: Cluster,
+    /// Other person-like clusters, most person-like first.
+    pub others: Vec<Cluster>,
+}
+
+impl Segmentation {
+    /// What the next frame of a video should start from.
+    pub fn hint(&self) -> SegmentHint {
+        SegmentHint {
+            planes: self.planes.clone(),
+            centroid: Some(self.person.centroid),
+        }
+    }
+}
+
+/// The person's pixels in `depth`: by background subtraction when `background` is given,
+/// else by support-plane removal and cluster choice (module docs). `hint` carries a
+/// video's previous frame. Errors with `NoBody` (saying what was found) when nothing
+/// looks like a person, and `InvalidArgument` when the background's size differs.
+pub fn segment_person(
+    depth: &DepthView,
+    camera: &Camera,
+    background: Option<&DepthView>,
+    config: &SegmentConfig,
+    hint: Option<&SegmentHint>,
+) -> Result<Segmentation> {
+    config.validate()?;
+    ensure(
+        camera.width == depth.width && camera.height == depth.height,
+        "camera",
+        || {
+            format!(
+                "is {}x{} but the depth image is {}x{}",
+                camera.width, camera.height, depth.width, depth.height
+            )
+        },
+    )?;
+    let rays = Rays::new(camera, depth.width, depth.height);
+    if let Some(bg) = background {
+        let mask = foreground_mask(depth, Some(bg), &config.foreground)?;
+        let person = measure_mask(depth, &rays, &mask, Vector3::new(0.0, -1.0, 0.0));
+        return Ok(Segmentation {
+            mask,
+            method: Method::Background,
+            planes: Vec::new(),
+            person,
+            others: Vec::new(),
+        });
+    }
+    let fg = &config.foreground;
+    let usable: Vec<bool> = depth
+        .data
+        .iter()
+        .map(|&z| z > fg.min_depth && z < fg.max_depth)
+        .collect();
+    let valid = usable.iter().filter(|&&u| u).count();
+    if valid == 0 {
+        return Err(Error::NoBody(if depth.count_valid() == 0 {
+            "depth: the image has no valid reading (all zero or NaN)".into()
+        } else {
+            format!(
+                "depth: no reading between {} and {} m",
+                fg.min_depth, fg.max_depth
+            )
+        }));
+    }
+    let previous = hint.map(|h| h.planes.as_slice()).unwrap_or(&[]);
+    let (planes, on_plane) =
+        planes::detect_planes(depth, camera, &usable, &config.planes, previous);
+    let candidate: Vec<bool> = usable
+        .iter()
+        .zip(&on_plane)
+        .map(|(&u, &p)| u & !p)
+        .collect();
+    // Medians are taken per group below, not per component.
+    let components = Components::label(depth, &candidate, fg.max_step, usize::MAX);
+    let up = clusters::up_direction(&planes);
+    let groups = clusters::bridge_gaps(depth, &components, MAX_GAP, fg.attach_depth);
+    let (found, cluster_of_group) = clusters::measure(
+        depth,
+        &rays,
+        &components,
+        (&groups.0, groups.1),
+        up,
+        fg.min_component,
+        &config.person,
+    );
+    let centroid = hint.and_then(|h| h.centroid);
+    let Some(chosen) = clusters::choose_person(&found, centroid, &config.person) else {
+        return Err(Error::NoBody(nobody_message(&planes, &found)));
+    };
+    let keep = clusters::pieces_of(&found, chosen, fg.attach_depth, &config.person);
+    let mut keep_cluster = vec![false; found.len()];
+    for &k in &keep {
+        keep_cluster[k] = true;
+    }
+    let keep_component: Vec<bool> = groups
+        .0
+        .iter()
+        .map(|&g| cluster_of_group[g] != usize::MAX && keep_cluster[cluster_of_group[g]])
+        .collect();
+    let mut mask = vec![false; depth.data.len()];
+    for &i in &components.pixels {
+        mask[i as usize] = keep_component[components.label[i as usize] as usize];
+    }
+    let bbox = clusters::bbox_of(&found, &keep);
+    let mut added = Vec::new();
+    for _ in 0..DROPOUT_FILL_PASSES {
+        fill_dropouts(depth, &mut mask, bbox, &mut added);
+    }
+    for _ in 0..MAJORITY_FILL_PASSES {
+        if !fill_majority(depth, &mut mask, &mut added) {
+            break;
+        }
+    }
+    let person = if keep.len() == 1 {
+        found[chosen]
+    } else {
+        measure_mask(depth, &rays, &mask, up)
+    };
+    let mut others: Vec<Cluster> = (0..found.len())
+        .filter(|&k| found[k].person_like && !keep.contains(&k))
+        .map(|k| found[k])
+        .collect();
+    others.sort_by(|a, b| b.score.total_cmp(&a.score));
+    Ok(Segmentation {
+        mask,
+        method: Method::Planes,
+        planes,
+        person,
+        others,
+    })
+}
+
+/// Pixels without a reading that may separate two parts of one object (dropouts along
+/// depth edges are 1–2 pixels wide, a projector's shadow a few more).
+const MAX_GAP: usize = 3;
+
+/// Passes of [`fill_majority`]: the ragged edge of a noisy sensor's silhouette is a few
+/// pixels deep.
+const MAJORITY_FILL_PASSES: usize = 3;
+
+/// Adds to the mask the pixels without a reading of which at least 5 of the 8
+/// neighbours are in it: dropouts that bite into the silhouette's edge (a smooth edge
+/// gives an outside pixel at most 3 neighbours inside, a projector's shadow band along
+/// it too). Returns whether any pixel was added. `add` is scratch.
+fn fill_majority(depth: &DepthView, mask: &mut [bool], add: &mut Vec<usize>) -> bool {
+    let (w, h) = (depth.width, depth.height);
+    add.clear();
+    if w < 3 || h < 3 {
+        return false;
+    }
+    for row in 1..h - 1 {
+        let (up, mid, down) = (
+            &mask[(row - 1) * w..][..w],
+            &mask[row * w..][..w],
+            &mask[(row + 1) * w..][..w],
+        );
+        // Skip rows without any mask pixel near them.
+        if !(up.contains(&true) || mid.contains(&true) || down.contains(&true)) {
+            continue;
+        }
+        for col in 1..w - 1 {
+            let i = row * w + col;
+            if mid[col] || depth.data[i] > 0.0 {
+                continue;
+            }
+            let n = up[col - 1] as u8
+                + up[col] as u8
+                + up[col + 1] as u8
+                + mid[col - 1] as u8
+                + mid[col + 1] as u8
+                + down[col - 1] as u8
+                + down[col] as u8
+                + down[col + 1] as u8;
+            if n >= 5 {
+                add.push(i);
+            }
+        }
+    }
+    for &i in add.iter() {
+        mask[i] = true;
+    }
+    !add.is_empty()
+}
+
+/// "No person found", saying what was found instead.
+fn nobody_message(planes: &[Plane], clusters: &[Cluster]) -> String {
+    let mut msg = format!(
+        "depth: no person-like object found ({} support plane{} removed, {} cluster{} left",
+        planes.len(),
+        if planes.len() == 1 { "" } else { "s" },
+        clusters.len(),
+        if clusters.len() == 1 { "" } else { "s" },
+    );
+    if let Some(c) = clusters.iter().max_by(|a, b| a.area.total_cmp(&b.area)) {
+        msg += &format!(
+            "; the largest covers {:.2} m², {:.2} m tall and {:.2} m wide, at {:.2} m",
+            c.area, c.height, c.width, c.median_depth
+        );
+    }
+    msg + ")"
+}
+
+/// The cluster measures of the pixels of `mask` that have a reading, as one cluster.
+fn measure_mask(depth: &DepthView, rays: &Rays, mask: &[bool], up: Vector3<f64>) -> Cluster {
+    let candidate: Vec<bool> = mask
+        .iter()
+        .zip(depth.data)
+        .map(|(&m, &z)| m && z > 0.0)
+        .collect();
+    let components = Components::label(depth, &candidate, f32::INFINITY, usize::MAX);
+    let one = vec![0; components.stats.len()];
+    let (found, _) = clusters::measure(
+        depth,
+        rays,
+        &components,
+        (&one, 1),
+        up,
+        1,
+        &PersonPrior::default(),
+    );
+    found.into_iter().next().unwrap_or(Cluster {
+        pixels: 0,
+        area: 0.0,
+        height: 0.0,
+        width: 0.0,
+        centroid: [f32::NAN; 3],
+        median_depth: f32::NAN,
+        bbox: [0; 4],
+        person_like: false,
+        score: 0.0,
+    })
+}

@@ -1,0 +1,328 @@
+//! Scenes built from the body model's renderer: a room (floor, back wall, optionally a
+//! side wall), the body standing on the floor, and clutter.
+
+use super::*;
+use crate::body::BodyModel;
+use crate::cloud::foreground::Components;
+
+/// A room seen by the ITOP-like camera: the floor at `floor` metres below the camera
+/// (y down), a back wall at `wall` metres, optionally a side wall at x = `side`.
+struct Room {
+    camera: Camera,
+    floor: f64,
+    wall: f64,
+    side: Option<f64>,
+}
+
+impl Room {
+    fn new() -> Self {
+        Room {
+            camera: Camera::itop(),
+            floor: 1.0,
+            wall: 5.0,
+            side: None,
+        }
+    }
+
+    /// Depth of the empty room (nearest of the planes along each ray).
+    fn depth(&self) -> Vec<f32> {
+        let c = &self.camera;
+        let mut out = vec![0.0f32; c.width * c.height];
+        for row in 0..c.height {
+            for col in 0..c.width {
+                let rx = (col as f64 - c.cx) / c.fx;
+                let ry = (row as f64 - c.cy) / c.fy;
+                let mut z = self.wall;
+                if ry > 0.0 {
+                    z = z.min(self.floor / ry);
+                }
+                if let Some(s) = self.side {
+                    if rx * s > 0.0 {
+                        z = z.min(s / rx);
+                    }
+                }
+                out[row * c.width + col] = z as f32;
+            }
+        }
+        out
+    }
+}
+
+/// The body's standing pose with its feet on a floor `floor` metres below the camera, its
+/// hip `x` metres right of the camera axis and `z` metres away.
+fn standing(model: &BodyModel, floor: f64, x: f64, z: f64) -> crate::body::Pose {
+    let mut pose = BodyModel::neutral_pose();
+    pose[0] = x;
+    pose[2] = z;
+    let joints = model.joints(&pose);
+    let lowest = joints.iter().map(|j| j[1]).fold(f64::MIN, f64::max);
+    // Ankles are about 8 cm above the soles.
+    pose[1] = floor - lowest - 0.08;
+    pose
+}
+
+/// Pastes a rendered body (depth 0 = none) over `scene`; returns the body's pixels.
+fn paste(scene: &mut [f32], body: &[f32]) -> Vec<bool> {
+    let mut mask = vec![false; scene.len()];
+    for ((s, &b), m) in scene.iter_mut().zip(body).zip(mask.iter_mut()) {
+        if b > 0.0 && b < *s {
+            *s = b;
+            *m = true;
+        }
+    }
+    mask
+}
+
+/// A box (axis-aligned in the camera frame) pasted over `scene`: its near face at depth
+/// `z0`, spanning x in `xs` and y in `ys` (camera frame, metres).
+fn paste_box(scene: &mut [f32], camera: &Camera, xs: (f64, f64), ys: (f64, f64), z0: f64) {
+    for row in 0..camera.height {
+        for col in 0..camera.width {
+            let rx = (col as f64 - camera.cx) / camera.fx;
+            let ry = (row as f64 - camera.cy) / camera.fy;
+            let (x, y) = (rx * z0, ry * z0);
+            let i = row * camera.width + col;
+            if x >= xs.0 && x <= xs.1 && y >= ys.0 && y <= ys.1 && (z0 as f32) < scene[i] {
+                scene[i] = z0 as f32;
+            }
+        }
+    }
+}
+
+fn iou(a: &[bool], b: &[bool]) -> f64 {
+    let inter = a.iter().zip(b).filter(|(&x, &y)| x && y).count();
+    let union = a.iter().zip(b).filter(|(&x, &y)| x || y).count();
+    inter as f64 / union.max(1) as f64
+}
+
+fn segment(scene: &[f32], camera: &Camera, hint: Option<&SegmentHint>) -> Result<Segmentation> {
+    let view = DepthView::new(scene, camera.height, camera.width, "depth").unwrap();
+    segment_person(&view, camera, None, &SegmentConfig::default(), hint)
+}
+
+#[test]
+fn a_person_in_a_room_is_found_without_a_background() {
+    let room = Room::new();
+    let model = BodyModel::new(1.75).unwrap();
+    let mut scene = room.depth();
+    let pose = standing(&model, room.floor, 0.2, 3.0);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    let seg = segment(&scene, &room.camera, None).unwrap();
+    assert_eq!(seg.method, Method::Planes);
+    assert_eq!(seg.planes.len(), 2, "floor and wall: {:?}", seg.planes);
+    let floor = seg
+        .planes
+        .iter()
+        .find(|p| p.normal[1] > 0.9)
+        .expect("a floor");
+    assert!((floor.offset - room.floor).abs() < 0.01, "{floor:?}");
+    let wall = seg
+        .planes
+        .iter()
+        .find(|p| p.normal[2] > 0.9)
+        .expect("a wall");
+    assert!((wall.offset - room.wall).abs() < 0.02, "{wall:?}");
+    let score = iou(&seg.mask, &truth);
+    assert!(score > 0.97, "IoU {score}");
+    assert!(
+        seg.person.height > 1.5 && seg.person.height < 1.9,
+        "{:?}",
+        seg.person
+    );
+    assert!(seg.others.is_empty(), "{:?}", seg.others);
+}
+
+#[test]
+fn clutter_beside_the_person_is_left_out() {
+    let mut room = Room::new();
+    room.side = Some(-2.0); // a side wall to the left
+    let model = BodyModel::new(1.75).unwrap();
+    let mut scene = room.depth();
+    // A box 0.5 m on a side standing on the floor to the person's right, and a tall
+    // narrow cabinet behind-left.
+    paste_box(
+        &mut scene,
+        &room.camera,
+        (0.7, 1.2),
+        (room.floor - 0.5, room.floor),
+        2.8,
+    );
+    paste_box(
+        &mut scene,
+        &room.camera,
+        (-1.4, -1.0),
+        (room.floor - 1.2, room.floor),
+        3.6,
+    );
+    let pose = standing(&model, room.floor, 0.0, 3.0);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    let seg = segment(&scene, &room.camera, None).unwrap();
+    assert_eq!(seg.planes.len(), 3, "{:?}", seg.planes);
+    let score = iou(&seg.mask, &truth);
+    assert!(score > 0.95, "IoU {score}");
+}
+
+#[test]
+fn a_person_touching_the_wall_is_found() {
+    let mut room = Room::new();
+    room.wall = 3.25;
+    let model = BodyModel::new(1.75).unwrap();
+    let mut scene = room.depth();
+    let pose = standing(&model, room.floor, 0.0, 3.1);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    let seg = segment(&scene, &room.camera, None).unwrap();
+    let score = iou(&seg.mask, &truth);
+    // The back of the body within the sensor's tolerance of the wall goes with it.
+    assert!(score > 0.85, "IoU {score}");
+}
+
+#[test]
+fn two_people_the_nearer_is_chosen_then_the_tracked_one_is_kept() {
+    let room = Room::new();
+    let model = BodyModel::new(1.75).unwrap();
+    let mut scene = room.depth();
+    let far = standing(&model, room.floor, -0.7, 3.6);
+    let near = standing(&model, room.floor, 0.7, 2.6);
+    let (body_far, _) = model.render_depth(&far, &room.camera);
+    let (body_near, _) = model.render_depth(&near, &room.camera);
+    let truth_far = paste(&mut scene, &body_far);
+    let truth_near = paste(&mut scene, &body_near);
+    let seg = segment(&scene, &room.camera, None).unwrap();
+    assert!(iou(&seg.mask, &truth_near) > 0.95);
+    assert_eq!(seg.others.len(), 1, "the other person is reported");
+    // A video that followed the far person keeps it.
+    let hint = SegmentHint {
+        planes: seg.planes.clone(),
+        centroid: Some(seg.others[0].centroid),
+    };
+    let followed = segment(&scene, &room.camera, Some(&hint)).unwrap();
+    assert!(iou(&followed.mask, &truth_far) > 0.9);
+}
+
+#[test]
+fn an_empty_room_has_no_body_and_says_what_it_saw() {
+    let room = Room::new();
+    let scene = room.depth();
+    let err = segment(&scene, &room.camera, None).unwrap_err();
+    let Error::NoBody(msg) = err else {
+        panic!("expected NoBody, got {err:?}")
+    };
+    assert!(msg.contains("2 support planes"), "{msg}");
+}
+
+#[test]
+fn the_previous_planes_are_reused() {
+    let room = Room::new();
+    let model = BodyModel::new(1.75).unwrap();
+    let mut scene = room.depth();
+    let pose = standing(&model, room.floor, 0.0, 3.0);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    let first = segment(&scene, &room.camera, None).unwrap();
+    let next = segment(&scene, &room.camera, Some(&first.hint())).unwrap();
+    assert_eq!(next.planes.len(), first.planes.len());
+    for (a, b) in next.planes.iter().zip(&first.planes) {
+        assert!((a.offset - b.offset).abs() < 1e-3);
+    }
+    assert!(iou(&next.mask, &truth) > 0.97);
+}
+
+#[test]
+fn a_lone_body_without_planes_is_found() {
+    // Real recordings often come with the background already removed.
+    let camera = Camera::itop();
+    let model = BodyModel::new(1.75).unwrap();
+    let pose = standing(&model, 1.0, 0.0, 2.5);
+    let (body, _) = model.render_depth(&pose, &camera);
+    let truth: Vec<bool> = body.iter().map(|&z| z > 0.0).collect();
+    let seg = segment(&body, &camera, None).unwrap();
+    assert!(seg.planes.is_empty());
+    assert!(iou(&seg.mask, &truth) > 0.99);
+}
+
+#[test]
+fn a_background_frame_is_used_when_given() {
+    let room = Room::new();
+    let model = BodyModel::new(1.75).unwrap();
+    let bg = room.depth();
+    let mut scene = bg.clone();
+    let pose = standing(&model, room.floor, 0.0, 3.0);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    let c = &room.camera;
+    let view = DepthView::new(&scene, c.height, c.width, "depth").unwrap();
+    let bgv = DepthView::new(&bg, c.height, c.width, "background").unwrap();
+    let seg = segment_person(&view, c, Some(&bgv), &SegmentConfig::default(), None).unwrap();
+    assert_eq!(seg.method, Method::Background);
+    assert!(iou(&seg.mask, &truth) > 0.95);
+}
+
+#[test]
+fn a_camera_of_another_size_is_refused() {
+    let camera = Camera::itop();
+    let depth = vec![1.0f32; 12];
+    let view = DepthView::new(&depth, 3, 4, "depth").unwrap();
+    let err = segment_person(&view, &camera, None, &SegmentConfig::default(), None);
+    assert!(matches!(err, Err(Error::InvalidArgument { .. })));
+}
+
+/// `n` rows × `w` columns of depth from a per-column profile.
+fn columns(h: usize, profile: &[f32]) -> Vec<f32> {
+    (0..h).flat_map(|_| profile.iter().copied()).collect()
+}
+
+#[test]
+fn gaps_without_readings_join_objects_and_readings_separate_them() {
+    let groups = |profile: &[f32]| {
+        let depth = columns(4, profile);
+        let view = DepthView::new(&depth, 4, profile.len(), "depth").unwrap();
+        let candidate: Vec<bool> = depth.iter().map(|&z| z > 0.0 && z < 4.0).collect();
+        let comp = Components::label(&view, &candidate, 0.05, usize::MAX);
+        let (group, n) = clusters::bridge_gaps(&view, &comp, 3, 0.5);
+        (comp.stats.len(), n, group)
+    };
+    // Two parts 0.2 m apart in depth, across two pixels without a reading: one object.
+    assert_eq!(groups(&[2.0, 2.0, 0.0, 0.0, 2.2, 2.2]).1, 1);
+    // Directly adjacent with a step the components do not join (0.3 m): one object.
+    assert_eq!(groups(&[2.0, 2.0, 2.3, 2.3]).1, 1);
+    // Four pixels without a reading are too wide a gap.
+    assert_eq!(groups(&[2.0, 0.0, 0.0, 0.0, 0.0, 2.0]).1, 2);
+    // A reading of something else between them (4.5 m, not a candidate) separates.
+    assert_eq!(groups(&[2.0, 2.0, 4.5, 2.0, 2.0]).1, 2);
+    // Too far apart in depth (0.8 m).
+    let (components, n, _) = groups(&[2.0, 0.0, 2.8]);
+    assert_eq!((components, n), (2, 2));
+}
+
+#[test]
+fn the_majority_fill_closes_bites_but_not_a_shadow_band() {
+    let (h, w) = (12, 12);
+    // A body block (rows 2..10, cols 3..9) with dropouts in it and a notch at its right
+    // edge,
+    // and a one-pixel band without readings along its left edge (a shadow).
+    let mut depth = vec![4.0f32; h * w];
+    let mut mask = vec![false; h * w];
+    for r in 2..10 {
+        for c in 3..9 {
+            depth[r * w + c] = 2.0;
+            mask[r * w + c] = true;
+        }
+        depth[r * w + 2] = 0.0;
+    }
+    for (r, c) in [(5, 8), (7, 6), (7, 7)] {
+        depth[r * w + c] = 0.0;
+        mask[r * w + c] = false;
+    }
+    let view = DepthView::new(&depth, h, w, "depth").unwrap();
+    let mut add = Vec::new();
+    while fill_majority(&view, &mut mask, &mut add) {}
+    for (r, c) in [(5, 8), (7, 6), (7, 7)] {
+        assert!(mask[r * w + c], "bite pixel ({r}, {c}) filled");
+    }
+    for r in 0..h {
+        assert!(!mask[r * w + 2], "shadow pixel ({r}, 2) left out");
+    }
+}
