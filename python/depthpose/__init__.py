@@ -1,19 +1,40 @@
 """depthpose: 3-D human pose from depth images and stereo pairs, live on a laptop CPU.
 
 The native core lives in the private module ``depthpose._core``; this package re-exports
-its public names with a typed API. Every error is a :class:`DepthPoseError` (a
-``ValueError``).
+its public names with a typed API.
+
+Errors: every error depthpose raises about its input is a :class:`DepthPoseError` (a
+``ValueError``) naming the argument or file:
+
+- :class:`InvalidInputError`: an argument of the wrong shape, dtype, range or content;
+  its subclass :class:`InvalidTypeError` (also a ``TypeError``) an argument of the
+  wrong Python type.
+- :class:`FileFormatError`: an unreadable, corrupt or truncated file; its subclass
+  :class:`MissingFileError` (also a ``FileNotFoundError``) a file that does not exist.
+- :class:`NoBodyError`: no usable body in the input (no valid depth, no foreground).
+- :class:`ResourceLimitError`: an input, or the result it asks for, beyond a size limit
+  (:data:`MAX_IMAGE_PIXELS`, :data:`MAX_ARRAY_ELEMENTS`, :data:`MAX_RESULT_BYTES`,
+  :data:`MAX_FIT_POINTS`), checked before anything is allocated.
+
+Nothing panics, aborts or hangs on bad input; see ``docs/robustness.md``.
 """
 
 from __future__ import annotations
 
 from . import graphcut, io, stereo, synth, viz
 from ._core import (
+    MAX_ARRAY_ELEMENTS,
+    MAX_FIT_POINTS,
+    MAX_IMAGE_PIXELS,
+    MAX_RESULT_BYTES,
     Camera,
     DepthPoseError,
     FileFormatError,
     InvalidInputError,
+    InvalidTypeError,
+    MissingFileError,
     NoBodyError,
+    ResourceLimitError,
     __version__,
     depth_to_points,
     pixel_graph,
@@ -61,7 +82,14 @@ __all__ = [
     "ShapeFitResult",
     "fit_shape",
     "InvalidInputError",
+    "InvalidTypeError",
+    "MAX_ARRAY_ELEMENTS",
+    "MAX_FIT_POINTS",
+    "MAX_IMAGE_PIXELS",
+    "MAX_RESULT_BYTES",
+    "MissingFileError",
     "NoBodyError",
+    "ResourceLimitError",
     "PointCloud",
     "Cluster",
     "Plane",

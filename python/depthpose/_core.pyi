@@ -8,10 +8,46 @@ import numpy.typing as npt
 
 __version__: str
 
-class DepthPoseError(ValueError): ...
-class InvalidInputError(DepthPoseError): ...
-class FileFormatError(DepthPoseError): ...
-class NoBodyError(DepthPoseError): ...
+# ---- errors and limits ----------------------------------------------------------------
+class DepthPoseError(ValueError):
+    """Base class of every depthpose error about its input (a ValueError). Messages name
+    the argument (or file) and print numbers briefly."""
+
+class InvalidInputError(DepthPoseError):
+    """An argument has the wrong shape, dtype, range or content."""
+
+class InvalidTypeError(InvalidInputError, TypeError):
+    """An argument of the wrong Python type (a str where a number is expected, a list
+    where a numpy array is, an object or string array where numbers are)."""
+
+class FileFormatError(DepthPoseError):
+    """A file is unreadable, corrupt, truncated or not in the expected format."""
+
+class MissingFileError(FileNotFoundError, FileFormatError):
+    """A file or folder that does not exist (errno ENOENT, ``filename`` set)."""
+
+class NoBodyError(DepthPoseError):
+    """The input holds no usable body (no valid depth, empty foreground)."""
+
+class ResourceLimitError(DepthPoseError):
+    """An input, or the result it asks for, exceeds a size limit; the message names the
+    limit. Checked before anything is allocated or copied."""
+
+#: Largest image (height × width) read, written, rendered or passed as a depth image,
+#: mask or picture: 2**23 pixels.
+MAX_IMAGE_PIXELS: int
+#: Most depth readings (within the mask) one body fit, shape calibration, template
+#: match or descriptor takes: 2**20.
+MAX_FIT_POINTS: int
+#: Largest number of elements of any other array argument: 2**26.
+MAX_ARRAY_ELEMENTS: int
+#: Largest result one call may allocate (an output array, a graph, meshes): 2**30 bytes.
+MAX_RESULT_BYTES: int
+#: Smallest and largest metres-per-unit scale of integer depth files (1e-6 and 1).
+MIN_DEPTH_SCALE: float
+MAX_DEPTH_SCALE: float
+#: Most labels of a CRF (alpha_expansion, alpha_beta_swap, crf_energy): 1024.
+MAX_LABELS: int
 
 # ---- camera -------------------------------------------------------------------------
 class Camera:
@@ -87,7 +123,16 @@ def read_float_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]: ...
 def write_depth_png(
     path: str | PathLike[str], depth: npt.NDArray[np.generic], scale: float = 0.001
 ) -> None: ...
-def write_rgb_png(path: str | PathLike[str], rgb: npt.NDArray[np.uint8]) -> None: ...
+def write_rgb_png(path: str | PathLike[str], rgb: npt.NDArray[np.integer]) -> None:
+    """Writes an (H, W, 3) picture of integers in 0..255 (any integer dtype and layout)."""
+
+def depth_metres(
+    depth: npt.NDArray[np.generic], name: str | None = None
+) -> npt.NDArray[np.float32]:
+    """``depth`` checked and converted as every depthpose function takes a depth image:
+    (H, W) float32/float64 metres or uint16 millimetres, C-contiguous, no negative or
+    infinite value (0 and NaN: no reading); returned as float32 metres. Errors name
+    ``name`` (default "depth")."""
 
 # ---- templates ----------------------------------------------------------------------
 def surface_context(

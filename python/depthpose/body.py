@@ -15,9 +15,19 @@ from typing import Any
 
 import numpy as np
 
-from depthpose._core import BodyModel
+from depthpose import _validate
+from depthpose._core import BodyModel, InvalidTypeError
 
 __all__ = ["BodyModel", "body_trimesh", "ellipsoid_trimeshes"]
+
+
+#: Most icosphere subdivisions of :func:`ellipsoid_trimeshes` (20 · 4**6 faces each).
+MAX_SUBDIVISIONS = 6
+
+
+def _check_model(model: object) -> None:
+    if not isinstance(model, BodyModel):
+        raise InvalidTypeError(f"model: expected a depthpose.BodyModel, got {type(model).__name__}")
 
 
 def body_trimesh(model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: int = 24) -> Any:
@@ -25,6 +35,7 @@ def body_trimesh(model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: i
     (camera frame); `face_attributes['part']` holds each face's segment label."""
     import trimesh
 
+    _check_model(model)
     parts = model.superquadric_meshes(pose, rings, sectors)
     meshes = [trimesh.Trimesh(v, f, process=False) for v, f in parts]
     labels = np.concatenate([np.full(len(f), k, np.int16) for k, (_, f) in enumerate(parts)])
@@ -38,6 +49,8 @@ def ellipsoid_trimeshes(model: BodyModel, pose: np.ndarray, subdivisions: int = 
     camera frame (one per segment, label order)."""
     import trimesh
 
+    _check_model(model)
+    subdivisions = _validate.integer(subdivisions, "subdivisions", low=0, high=MAX_SUBDIVISIONS)
     centres, rotations, radii = model.ellipsoids(pose)
     out = []
     for c, r, e in zip(centres, rotations, radii, strict=False):

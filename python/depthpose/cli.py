@@ -26,33 +26,54 @@ def _check_writable(out: Path) -> None:
         raise InvalidInputError(f"--out {out}: cannot write there ({e.strerror or e})") from None
 
 
+def _failure(e: Exception) -> str:
+    """How a frame's error is reported: its class and message (an exception that is not
+    a DepthPoseError is a bug, and says so)."""
+    if isinstance(e, DepthPoseError):
+        return f"{type(e).__name__}: {e}"
+    return f"internal error (please report it) {type(e).__name__}: {e}"
+
+
+def _exit_code(done: int, failed: int) -> int:
+    """0 when every item succeeded, 1 when some failed, 2 when none could be done."""
+    if failed == 0:
+        return 0
+    return 1 if done > 0 else 2
+
+
 def _cmd_foreground(args: argparse.Namespace) -> int:
-    """Foreground masks of depth frames, written as pictures."""
+    """Foreground masks of depth frames, written as pictures, image by image: an image
+    that fails is reported and the others are written."""
     from . import foreground_mask, read_depth, viz
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    background = read_depth(args.background) if args.background else None
-    failures = 0
+    background = read_depth(args.background, scale=args.depth_scale) if args.background else None
+    done = failed = 0
     for path in args.inputs:
         try:
             depth = read_depth(path, scale=args.depth_scale)
             mask = foreground_mask(depth, background)
-        except DepthPoseError as e:
-            print(f"{path}: {e}", file=sys.stderr)
-            failures += 1
+            pic = viz.overlay_mask(viz.colorize_depth(depth), mask)
+            viz.save_png(out / (Path(path).stem + "_foreground.png"), pic)
+        except Exception as e:  # one image's failure must not stop the others
+            print(f"{path}: {_failure(e)}", file=sys.stderr)
+            failed += 1
             continue
-        pic = viz.overlay_mask(viz.colorize_depth(depth), mask)
-        viz.save_png(out / (Path(path).stem + "_foreground.png"), pic)
+        done += 1
         print(f"{path}: {int(mask.sum())} body pixels")
-    return 1 if failures else 0
+    if failed:
+        print(f"{done}/{done + failed} images done, {failed} failed", file=sys.stderr)
+    return _exit_code(done, failed)
 
 
 def _cmd_estimate(args: argparse.Namespace) -> int:
-    """Poses of every frame of a sequence, a folder of frames or one image."""
+    """Poses of every frame of a sequence, a folder of frames or one image, frame by
+    frame: a frame that cannot be read or estimated is reported (which, why) and
+    recorded as NaN; the others are estimated and written."""
     import json
 
-    from .pipeline import JOINT_NAMES, estimate_frames
+    from .pipeline import JOINT_NAMES, PoseEstimator, PoseTracker
     from .sequence import open_sequence
 
     seq = open_sequence(args.input, intrinsics=args.intrinsics, depth_scale=args.depth_scale)
@@ -62,46 +83,64 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     if viz_dir:
         viz_dir.mkdir(parents=True, exist_ok=True)
     jsonl = open(args.jsonl, "w") if args.jsonl else None  # noqa: SIM115
-    t0 = time.perf_counter()
-
-    def on_frame(k: int, res) -> None:
-        if jsonl:
-            jsonl.write(json.dumps({"frame": k, **res.to_dict()}) + "\n")
-        if viz_dir:
-            from . import viz
-
-            pic = viz.overlay_labels(viz.colorize_depth(frames[k]), res.labels)
-            pic = viz.draw_skeleton(pic, res.joints, seq.camera)
-            viz.save_png(viz_dir / f"frame_{k:05d}.png", pic)
-        sys.stderr.write(f"\rframe {k + 1}/{seq.n_frames}")
-
-    frames = seq.frames()
-    res = estimate_frames(
-        frames, seq.camera, background=seq.background, track=args.track, on_frame=on_frame
-    )
-    sys.stderr.write("\n")
-    if jsonl:
-        for e in res.errors:
-            jsonl.write(
-                json.dumps({"frame": e["frame"], "joints": None, "error": e["error"]}) + "\n"
-            )
-        jsonl.close()
-    for e in res.errors:
-        print(f"frame {e['frame']}: {e['error']}", file=sys.stderr)
-    np.savez(
-        out, joints=res.joints, pose=res.pose, confidence=res.confidence,
-        joint_names=np.array(JOINT_NAMES),
-    )  # fmt: skip
     n = seq.n_frames
+    joints = np.full((n, 15, 3), np.nan)
+    pose = np.full((n, 22), np.nan)
+    confidence = np.zeros((n, 15))
+    errors: list[tuple[int, str]] = []
+    if args.track:
+        tracker = PoseTracker(seq.camera, background=seq.background)
+        step = tracker.update
+    else:
+        step = PoseEstimator(seq.camera, background=seq.background).estimate
+    t0 = time.perf_counter()
+    try:
+        for k, frame in seq.iter_frames():
+            sys.stderr.write(f"\rframe {k + 1}/{n}")
+            try:
+                if isinstance(frame, Exception):
+                    raise frame
+                res = step(frame)
+                if viz_dir:
+                    from . import viz
+
+                    pic = viz.overlay_labels(viz.colorize_depth(frame), res.labels)
+                    pic = viz.draw_skeleton(pic, res.joints, seq.camera)
+                    viz.save_png(viz_dir / f"frame_{k:05d}.png", pic)
+            except Exception as e:  # one frame's failure must not stop the others
+                if args.track:
+                    tracker.reset()
+                joints[k], pose[k], confidence[k] = np.nan, np.nan, 0.0
+                errors.append((k, _failure(e)))
+                if jsonl:
+                    jsonl.write(json.dumps({"frame": k, "joints": None, "error": errors[-1][1]}))
+                    jsonl.write("\n")
+                continue
+            joints[k], pose[k], confidence[k] = res.joints, res.pose, res.confidence
+            if jsonl:
+                jsonl.write(json.dumps({"frame": k, **res.to_dict()}) + "\n")
+    finally:
+        sys.stderr.write("\n")
+        if jsonl:
+            jsonl.close()
+    for k, message in errors:
+        print(f"frame {k} ({seq.frame_name(k)}): {message}", file=sys.stderr)
+    np.savez(
+        out, joints=joints, pose=pose, confidence=confidence,
+        joint_names=np.array(JOINT_NAMES),
+        failed_frames=np.array([k for k, _ in errors], np.int64),
+        errors=np.array([m for _, m in errors], dtype=str),
+    )  # fmt: skip
     dt = time.perf_counter() - t0
-    print(f"{n - len(res.errors)}/{n} frames estimated in {dt:.1f} s ({n / dt:.1f} frames/s)")
-    if seq.gt_joints is not None and seq.gt_joints.shape == res.joints.shape:
+    done = n - len(errors)
+    print(f"{done}/{n} frames estimated in {dt:.1f} s ({n / max(dt, 1e-9):.1f} frames/s)")
+    if seq.gt_joints is not None and seq.gt_joints.shape == joints.shape:
         from .metrics import evaluate
 
-        acc = evaluate(res.joints, seq.gt_joints)
+        acc = evaluate(joints, seq.gt_joints)
         print(f"against the sequence's joints: MPJPE {acc['mpjpe_mm']:.1f} mm, "
               f"PCK@10cm {100 * acc['pck']:.1f} %")  # fmt: skip
-    return 0 if not res.errors else 1
+    return _exit_code(done, len(errors))
 
 
 def _cmd_batch(args: argparse.Namespace) -> int:
@@ -165,6 +204,12 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
     est.add_argument("--depth-scale", type=float, default=0.001, help="metres per unit")
     est.set_defaults(func=_cmd_estimate)
+    est.epilog = (
+        "Frames are estimated one by one: a frame that cannot be read or estimated is "
+        "reported on stderr and recorded as NaN (its index and error are in the output's "
+        "failed_frames and errors). Exit code 0: every frame estimated; 1: some failed; "
+        "2: none could be (or the input could not be opened)."
+    )
 
     bat = sub.add_parser("batch", help="many sequences on a Dask cluster, resumable")
     bat.add_argument("inputs", nargs="+", help="sequences (.npz), frame folders or globs")
@@ -195,6 +240,7 @@ def build_parser() -> argparse.ArgumentParser:
     fg.add_argument("--background", help="depth image of the empty scene")
     fg.add_argument("--depth-scale", type=float, default=0.001, help="metres per unit")
     fg.set_defaults(func=_cmd_foreground)
+    fg.epilog = "Exit code 0: every image done; 1: some failed; 2: none could be."
     return p
 
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core
+from . import _core, _validate
 from ._core import Camera, Cluster, Plane, Segmentation
 
 __all__ = [
@@ -48,7 +48,9 @@ def point_cloud(
     connectivity: int = 4,
     normal_radius: int = 2,
 ) -> PointCloud:
-    """Points, normals and the 4- or 8-neighbour graph of the (masked) depth pixels."""
+    """Points, normals and the 4- or 8-neighbour graph of the (masked) depth pixels;
+    ``normal_radius`` in 1..32 pixels."""
+    normal_radius = _validate.integer(normal_radius, "normal_radius", low=1, high=32)
     points, pixels = _core.depth_to_points(depth, camera, mask)
     normals = _core.surface_normals(depth, camera, mask, normal_radius)
     edges, distance, depth_diff = _core.pixel_graph(depth, camera, mask, connectivity)

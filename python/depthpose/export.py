@@ -9,7 +9,8 @@ from typing import Any, Union
 
 import numpy as np
 
-from ._core import InvalidInputError
+from . import _validate
+from ._core import BodyModel, InvalidInputError, InvalidTypeError
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -28,6 +29,18 @@ BVH_PARENTS = {
 _FLIP = np.diag([1.0, -1.0, -1.0])
 
 
+def _model(model: object) -> BodyModel:
+    if not isinstance(model, BodyModel):
+        raise InvalidTypeError(f"model: expected a depthpose.BodyModel, got {type(model).__name__}")
+    return model
+
+
+def _path(path: object) -> str:
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
+    return os.fspath(path)
+
+
 def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
     """The posed super-quadric body as one ``trimesh.Trimesh`` (camera frame, metres),
     each segment's faces coloured by part."""
@@ -35,6 +48,7 @@ def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
 
     from .viz import PART_COLORS
 
+    model = _model(model)
     parts = []
     for k, (v, f) in enumerate(model.superquadric_meshes(pose, rings, sectors)):
         m = trimesh.Trimesh(vertices=v, faces=f, process=False)
@@ -46,7 +60,7 @@ def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
 
 def save_mesh(path: PathLike, model, pose: np.ndarray) -> None:
     """Writes the posed body; the format follows the suffix (.ply, .glb, .gltf, .obj, .stl)."""
-    suffix = os.fspath(path).rsplit(".", 1)[-1].lower()
+    suffix = _path(path).rsplit(".", 1)[-1].lower()
     if suffix not in ("ply", "glb", "gltf", "obj", "stl"):
         raise InvalidInputError(f"path: unknown mesh format .{suffix} (ply, glb, gltf, obj, stl)")
     body_mesh(model, pose).export(os.fspath(path))
@@ -74,13 +88,33 @@ def _rot(axis: str, deg: float) -> np.ndarray:
 
 
 def write_bvh(path: PathLike, model, poses: np.ndarray, fps: float = 30.0) -> None:
-    """Writes a tracked sequence (T, 22) as BVH: one joint per body segment at its
-    proximal joint, the rest pose being all joint angles zero (segments parallel to the
-    body frame), y up, metres. Frames with a NaN pose repeat the previous frame."""
-    poses = np.asarray(poses, np.float64)
+    """Writes a tracked sequence (T, 22) as BVH at ``fps`` frames per second: one
+    joint per body segment at its proximal joint, the rest pose being all joint angles
+    zero (segments parallel to the body frame), y up, metres. A failed frame (a pose of
+    22 NaN, as the estimators record it) repeats the previous frame; a pose with some
+    NaN or any infinite value is refused."""
+    path = _path(path)
+    model = _model(model)
+    fps = _validate.number(fps, "fps", low=0.0, low_open=True, high=1e6)
+    arr = _validate.array(np.asarray(poses) if isinstance(poses, (list, tuple)) else poses, "poses")
+    why = _validate._not_numbers(arr.dtype)
+    if why is not None:
+        raise (InvalidInputError if arr.dtype.kind == "b" else InvalidTypeError)(
+            f"poses: dtype {arr.dtype}: {why}"
+        )
+    poses = arr.astype(np.float64)
     if poses.ndim != 2 or poses.shape[1] != 22 or len(poses) == 0:
         raise InvalidInputError(f"poses: expected (T, 22), got shape {poses.shape}")
-    if not np.isfinite(poses).any(axis=1).any():
+    if np.isinf(poses).any():
+        raise InvalidInputError("poses: holds an infinite value")
+    nan = np.isnan(poses)
+    partial = nan.any(axis=1) & ~nan.all(axis=1)
+    if partial.any():
+        k = int(np.flatnonzero(partial)[0])
+        raise InvalidInputError(
+            f"poses[{k}]: some parameters are NaN, not all (a failed frame is all NaN)"
+        )
+    if nan.all():
         raise InvalidInputError("poses: every frame is NaN")
     names = list(model.part_names)
     rest = np.zeros(22)
@@ -140,7 +174,15 @@ def write_bvh(path: PathLike, model, poses: np.ndarray, fps: float = 30.0) -> No
 
 
 def write_jsonl(path: PathLike, results: list[Any]) -> None:
-    """One JSON line per frame (a ``PoseResult`` or None for a failed frame)."""
+    """One JSON line per frame: a ``PoseResult`` (anything with ``to_dict()``) or None
+    for a failed frame."""
+    path = _path(path)
+    results = list(results)
+    for k, r in enumerate(results):
+        if r is not None and not callable(getattr(r, "to_dict", None)):
+            raise InvalidTypeError(
+                f"results[{k}]: expected a PoseResult or None, got {type(r).__name__}"
+            )
     with open(path, "w") as f:
         for k, r in enumerate(results):
             rec = {"frame": k, **r.to_dict()} if r is not None else {"frame": k, "joints": None}

@@ -17,7 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from depthpose._core import BodyModel, Camera, FitConfig, FitResult, ShapeFitResult
+from depthpose._core import (
+    BodyModel,
+    Camera,
+    FitConfig,
+    FitResult,
+    InvalidInputError,
+    InvalidTypeError,
+    ShapeFitResult,
+)
 from depthpose._core import fit_pose as _fit_pose
 from depthpose._core import fit_poses as _fit_poses
 from depthpose._core import label_all_pixels as _label_all_pixels
@@ -39,8 +47,29 @@ def _config(config: None | FitConfig | Mapping[str, Any]) -> FitConfig | None:
     if config is None or isinstance(config, FitConfig):
         return config
     if isinstance(config, Mapping):
-        return FitConfig(**dict(config))
-    raise TypeError(f"config must be a FitConfig, a dict or None, got {type(config).__name__}")
+        bad = [k for k in config if not isinstance(k, str)]
+        if bad:
+            raise InvalidTypeError(f"config: keys must be setting names, got {bad[0]!r}")
+        try:
+            return FitConfig(**dict(config))
+        except TypeError as e:
+            if isinstance(e, InvalidTypeError):
+                raise
+            raise InvalidTypeError(f"config: {e}") from None
+    raise InvalidTypeError(
+        f"config: expected a FitConfig, a dict or None, got {type(config).__name__}"
+    )
+
+
+def _array(value: Any, name: str) -> Any:
+    """Lists and tuples as numpy arrays (a ragged one is refused by name); arrays and
+    anything else pass through for the native checks."""
+    if isinstance(value, (list, tuple)):
+        try:
+            return np.asarray(value)
+        except (ValueError, TypeError):
+            raise InvalidInputError(f"{name}: not a rectangular array of numbers") from None
+    return value
 
 
 def fit_pose(
@@ -82,11 +111,11 @@ def fit_pose(
     return _fit_pose(
         depth,
         camera,
-        np.asarray(init_pose),
+        _array(init_pose, "init_pose"),
         model=model,
         mask=mask,
         config=_config(config),
-        prior=None if prior is None else np.asarray(prior),
+        prior=None if prior is None else _array(prior, "prior"),
         prior_weight=prior_weight,
         resume=resume,
     )
@@ -114,13 +143,13 @@ def fit_poses(
     return _fit_poses(
         depth,
         camera,
-        np.asarray(init_poses),
+        _array(init_poses, "init_poses"),
         model=model,
         mask=mask,
         config=_config(config),
-        prior=None if prior is None else np.asarray(prior),
+        prior=None if prior is None else _array(prior, "prior"),
         prior_weight=prior_weight,
-        resume=None if resume is None else list(resume),
+        resume=resume,
     )
 
 
@@ -151,7 +180,7 @@ def label_all_pixels(
         model=model,
         mask=mask,
         config=_config(config),
-        prior=None if prior is None else np.asarray(prior),
+        prior=None if prior is None else _array(prior, "prior"),
         prior_weight=prior_weight,
     )
 
@@ -160,7 +189,9 @@ def pose_from_joints(
     joints: np.ndarray, model: BodyModel | None = None, init: np.ndarray | None = None
 ) -> np.ndarray:
     """The pose (22,) whose joints best match `joints` (15, 3) in the camera frame."""
-    return _pose_from_joints(np.asarray(joints), model, None if init is None else np.asarray(init))
+    return _pose_from_joints(
+        _array(joints, "joints"), model, None if init is None else _array(init, "init")
+    )
 
 
 def fit_shape(
@@ -186,6 +217,8 @@ def fit_shape(
     increases. Returns a `ShapeFitResult`: `model` (the calibrated `BodyModel`),
     `factors` (12,), `poses` (F, 22), `joints` (F, 15, 3), `labels`, `energy_trace`.
     """
+    if model is not None and not isinstance(model, BodyModel):
+        raise InvalidTypeError(f"model: expected a depthpose.BodyModel, got {type(model).__name__}")
     base = BodyModel() if model is None else model
     return base.fit_shape(
         depths,

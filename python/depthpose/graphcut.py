@@ -4,7 +4,10 @@ The E-step of the pose fit labels points with body parts by minimising
 ``E(l) = Σ_i unary[i, l_i] + Σ_e weights[e] · pairwise[l_i, l_j]`` with
 :func:`alpha_expansion`; :class:`Graph` is the max-flow underneath, usable on its own.
 Integer inputs (costs, capacities) give exact integer answers. Bad input raises
-:class:`depthpose.InvalidInputError` naming the argument.
+:class:`depthpose.InvalidInputError` naming the argument; costs so large that a move's
+flow could overflow float64 are refused the same way (a graph cut on an infinite
+capacity would never end). Arrays may have any memory layout. A CRF has at most
+``MAX_LABELS`` (1024) labels.
 """
 
 from __future__ import annotations
@@ -15,7 +18,7 @@ import numpy as np
 
 from . import _core
 
-__all__ = ["Graph", "grid_edges", "alpha_expansion", "alpha_beta_swap", "energy"]
+__all__ = ["Graph", "grid_edges", "alpha_expansion", "alpha_beta_swap", "energy", "MAX_LABELS"]
 
 #: Default number of cycles over all labels (expansion) or label pairs (swap).
 DEFAULT_MAX_CYCLES = 20
@@ -23,10 +26,16 @@ DEFAULT_MAX_CYCLES = 20
 Number = int | float
 
 
+#: Most labels of a CRF (its pairwise table is L × L).
+MAX_LABELS: int = _core.MAX_LABELS
+
+
 def _c(a: Any) -> Any:
-    """Numpy arrays made C-contiguous (column slices like ``edges[:, 0]`` are fine);
-    anything else passes through for the native checks to reject by name."""
-    return np.ascontiguousarray(a) if isinstance(a, np.ndarray) else a
+    """An argument as the native checks take it: numpy arrays of any layout (column
+    slices like ``edges[:, 0]``, Fortran order, reversed views) pass as they are,
+    without a copy before the size checks; anything else too, for the native checks to
+    reject by name."""
+    return a
 
 
 class Graph:

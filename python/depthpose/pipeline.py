@@ -16,13 +16,14 @@ from typing import Any
 
 import numpy as np
 
-from . import _core
+from . import _core, _validate
 from ._core import (
     JOINT_NAMES,
     BodyModel,
     Camera,
     DepthPoseError,
     InvalidInputError,
+    InvalidTypeError,
     PipelineConfig,
     PoseResult,
     ShapeFitResult,
@@ -54,7 +55,7 @@ def _native_templates(templates: Any) -> Any:
     if templates is None:
         templates = TemplateDatabase.default()
     if not isinstance(templates, TemplateDatabase):
-        raise InvalidInputError(
+        raise InvalidTypeError(
             f"templates: expected a TemplateDatabase, got {type(templates).__name__}"
         )
     return templates._db
@@ -62,11 +63,11 @@ def _native_templates(templates: Any) -> Any:
 
 def _check(camera: Any, model: Any, config: Any) -> None:
     if not isinstance(camera, Camera):
-        raise InvalidInputError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
+        raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
     if model is not None and not isinstance(model, BodyModel):
-        raise InvalidInputError(f"model: expected a BodyModel, got {type(model).__name__}")
+        raise InvalidTypeError(f"model: expected a BodyModel, got {type(model).__name__}")
     if config is not None and not isinstance(config, PipelineConfig):
-        raise InvalidInputError(f"config: expected a PipelineConfig, got {type(config).__name__}")
+        raise InvalidTypeError(f"config: expected a PipelineConfig, got {type(config).__name__}")
 
 
 class PoseEstimator:
@@ -193,7 +194,7 @@ class PoseTracker:
     ) -> None:
         _check(camera, model, config)
         if calibrate is not None and not isinstance(calibrate, (bool, np.bool_)):
-            raise InvalidInputError(
+            raise InvalidTypeError(
                 f"calibrate: expected True, False or None, got {type(calibrate).__name__}"
             )
         self._native = _core._PoseTracker(
@@ -315,14 +316,28 @@ def estimate_frames(
     reset and the loop goes on. ``on_frame(index, result)`` is called after each
     returned frame (``index`` counts from ``first_frame``).
     """
-    frames = np.asarray(frames)
+    if isinstance(frames, (list, tuple)):
+        try:
+            frames = np.asarray(frames)
+        except (ValueError, TypeError):
+            raise InvalidInputError("frames: not a stack of equally sized depth images") from None
+    if not isinstance(frames, np.ndarray):
+        raise InvalidTypeError(f"frames: expected a numpy array, got {type(frames).__name__}")
     if frames.ndim != 3:
         raise InvalidInputError(f"frames: expected (T, H, W), got shape {frames.shape}")
-    if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or warmup < 0:
-        raise InvalidInputError(f"warmup: expected an integer >= 0, got {warmup!r}")
-    n = frames.shape[0] - int(warmup)
-    if n < 0:
+    if frames.dtype.kind not in "fu":
+        raise (InvalidTypeError if frames.dtype.kind in "OUSV" else InvalidInputError)(
+            f"frames: depth must be float metres or uint16 millimetres, got dtype {frames.dtype}"
+        )
+    if isinstance(warmup, int) and not isinstance(warmup, bool) and warmup > frames.shape[0]:
         raise InvalidInputError(f"warmup: {warmup} exceeds the {frames.shape[0]} frames")
+    warmup = _validate.integer(warmup, "warmup", low=0, high=frames.shape[0])
+    first_frame = _validate.integer(first_frame, "first_frame", low=0)
+    if not isinstance(track, (bool, np.bool_)):
+        raise InvalidTypeError(f"track: expected True or False, got {type(track).__name__}")
+    if on_frame is not None and not callable(on_frame):
+        raise InvalidTypeError(f"on_frame: expected a callable, got {type(on_frame).__name__}")
+    n = frames.shape[0] - warmup
     out = FramesResult(np.full((n, 15, 3), np.nan), np.full((n, 22), np.nan), np.zeros((n, 15)), [])
     tracker: PoseTracker | None = None
     if track:
@@ -383,10 +398,12 @@ def estimate_stereo(
     from . import stereo
 
     if not isinstance(camera, Camera):
-        raise InvalidInputError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
+        raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
     number = isinstance(baseline, (int, float, np.integer, np.floating))
     if isinstance(baseline, bool) or not number:
-        raise InvalidInputError(f"baseline: expected a number of metres, got {baseline!r}")
+        raise InvalidTypeError(
+            f"baseline: expected a number of metres, got {_validate.type_name(baseline)}"
+        )
     if not (np.isfinite(baseline) and baseline > 0):
         raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
     if mask is not None and background is not None:

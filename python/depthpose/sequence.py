@@ -1,18 +1,33 @@
-"""Depth sequences on disk: a .npz in the shared layout, a folder of 16-bit PNG frames, or
-a single depth image. Used by ``depthpose estimate`` and ``depthpose batch``."""
+"""Depth sequences on disk: a .npz in the shared layout, a folder of depth frames, or a
+single depth image. Used by ``depthpose estimate`` and ``depthpose batch``.
+
+A folder is read frame by frame: :meth:`Sequence.iter_frames` yields each frame or
+the error that frame raised (corrupt, truncated, another size), so one bad frame
+does not stop the others.
+"""
 
 from __future__ import annotations
 
 import glob
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Union
 
 import numpy as np
 
-from ._core import Camera, FileFormatError, InvalidInputError
-from .io import read_depth
+from . import _validate
+from ._core import (
+    MAX_DEPTH_SCALE,
+    MIN_DEPTH_SCALE,
+    Camera,
+    DepthPoseError,
+    FileFormatError,
+    InvalidInputError,
+    InvalidTypeError,
+)
+from .io import missing_file, read_depth, read_npz
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -23,7 +38,8 @@ FRAME_SUFFIXES = (".png", ".tif", ".tiff", ".npy", ".pfm", ".u16")
 
 @dataclass
 class Sequence:
-    """A depth sequence: frames are read on demand with :meth:`frames`."""
+    """A depth sequence: frames are read on demand with :meth:`frames` or
+    :meth:`iter_frames`."""
 
     path: Path
     name: str
@@ -36,21 +52,65 @@ class Sequence:
     fps: float = 30.0
     files: list[Path] = field(default_factory=list)
 
-    def frames(self, start: int = 0, stop: int | None = None) -> np.ndarray:
-        """Depth frames [start, stop) as float32 metres, (k, H, W)."""
-        stop = self.n_frames if stop is None else min(stop, self.n_frames)
-        if not 0 <= start <= stop:
+    def _range(self, start: int, stop: int | None) -> tuple[int, int]:
+        start = _validate.integer(start, "start", low=0)
+        stop = self.n_frames if stop is None else _validate.integer(stop, "stop", low=0)
+        stop = min(stop, self.n_frames)
+        if start > stop:
             raise InvalidInputError(f"start/stop: bad frame range [{start}, {stop})")
-        if self.kind == "npz":
-            with np.load(self.path, allow_pickle=False) as d:
-                depth = d["depth"][start:stop]
-            return _to_metres(depth, self.depth_scale, self.path)
-        out = [read_depth(f, scale=self.depth_scale) for f in self.files[start:stop]]
+        return start, stop
+
+    def _npz_depth(self, start: int, stop: int) -> np.ndarray:
+        arrays = read_npz(self.path, "a depth sequence", keys=["depth"])
+        if "depth" not in arrays:
+            raise FileFormatError(f"{self.path}: no 'depth' array")
+        depth = arrays["depth"][start:stop]
+        return _to_metres(depth, self.depth_scale, self.path)
+
+    def _read_file(self, k: int) -> np.ndarray:
+        f = self.files[k]
+        d = read_depth(f, scale=self.depth_scale)
         shape = (self.camera.height, self.camera.width)
-        for f, d in zip(self.files[start:stop], out, strict=False):
-            if d.shape != shape:
-                raise FileFormatError(f"{f}: frame is {d.shape}, the sequence is {shape}")
+        if d.shape != shape:
+            raise FileFormatError(
+                f"{f}: frame is {d.shape[1]}x{d.shape[0]} pixels, the sequence is "
+                f"{shape[1]}x{shape[0]}"
+            )
+        return d
+
+    def frames(self, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Depth frames [start, stop) as float32 metres, (k, H, W). A frame that cannot
+        be read raises its error (see :meth:`iter_frames` for reading around it)."""
+        start, stop = self._range(start, stop)
+        if self.kind == "npz":
+            return self._npz_depth(start, stop)
+        out = [self._read_file(k) for k in range(start, stop)]
+        shape = (self.camera.height, self.camera.width)
         return np.stack(out) if out else np.zeros((0, *shape), np.float32)
+
+    def iter_frames(
+        self, start: int = 0, stop: int | None = None
+    ) -> Iterator[tuple[int, np.ndarray | DepthPoseError]]:
+        """(index, frame) for each frame in [start, stop): the depth (H, W) float32
+        metres, or the :class:`DepthPoseError` (a ``MissingFileError`` or
+        ``FileFormatError``) that frame raised when read."""
+        start, stop = self._range(start, stop)
+        if self.kind == "npz":
+            depth = self._npz_depth(start, stop)
+            for k in range(start, stop):
+                yield k, depth[k - start]
+            return
+        for k in range(start, stop):
+            try:
+                yield k, self._read_file(k)
+            except DepthPoseError as e:
+                yield k, e
+
+    def frame_name(self, k: int) -> str:
+        """How messages name frame ``k``: its file, or its index in the .npz."""
+        if self.files and 0 <= k < len(self.files):
+            return str(self.files[k])
+        return f"{self.path}[{k}]"
 
 
 def _to_metres(depth: np.ndarray, scale: float, path: Path) -> np.ndarray:
@@ -66,16 +126,36 @@ def _camera(intrinsics, shape: tuple[int, int], path: Path) -> Camera:
         raise InvalidInputError(
             f"intrinsics: {path} has no camera intrinsics; pass --intrinsics fx fy cx cy"
         )
-    vals = [float(v) for v in np.asarray(intrinsics).ravel()]
-    return Camera.from_intrinsics(vals, shape)
+    vals = _validate.numbers_array(intrinsics, "intrinsics").ravel()
+    if vals.size != 4:
+        raise InvalidInputError(f"intrinsics: need [fx, fy, cx, cy], got {vals.size} values")
+    return Camera.from_intrinsics([float(v) for v in vals], tuple(int(v) for v in shape))
+
+
+def _first_readable(files: list[Path], scale: float, folder: Path) -> np.ndarray:
+    """The first frame of ``files`` that can be read (its size is the sequence's)."""
+    first_error: DepthPoseError | None = None
+    for f in files:
+        try:
+            return read_depth(f, scale=scale)
+        except DepthPoseError as e:
+            first_error = first_error or e
+    raise FileFormatError(
+        f"{folder}: none of its {len(files)} depth frames can be read (first: {first_error})"
+    )
 
 
 def open_sequence(path: PathLike, *, intrinsics=None, depth_scale: float = 0.001) -> Sequence:
     """Opens a .npz (keys ``depth`` (T, H, W), ``intrinsics``, optional ``background``,
-    ``joints``, ``fps``), a folder of depth frames (sorted by name) or one depth image."""
+    ``joints``, ``fps``), a folder of depth frames (sorted by name; its size is that of
+    the first frame that can be read) or one depth image. ``depth_scale``: metres per
+    integer unit, in [1e-6, 1]."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
+    scale = _validate.number(depth_scale, "depth_scale", low=MIN_DEPTH_SCALE, high=MAX_DEPTH_SCALE)
     p = Path(path)
     if not p.exists():
-        raise FileFormatError(f"{p}: no such file or folder")
+        raise missing_file(p)
     if p.is_dir():
         files = sorted(f for f in p.iterdir() if f.suffix.lower() in FRAME_SUFFIXES)
         if not files:
@@ -84,46 +164,41 @@ def open_sequence(path: PathLike, *, intrinsics=None, depth_scale: float = 0.001
         files = [f for f in files if f.name != "background.png"]
         if not files:
             raise FileFormatError(f"{p}: no depth frames besides background.png")
-        first = read_depth(files[0], scale=depth_scale)
-        bg = read_depth(bg_file, scale=depth_scale) if bg_file.exists() else None
+        first = _first_readable(files, scale, p)
+        bg = read_depth(bg_file, scale=scale) if bg_file.exists() else None
         return Sequence(
             p,
             p.name,
             "folder",
             len(files),
             _camera(intrinsics, first.shape, p),
-            depth_scale,
+            scale,
             bg,
             files=files,
         )
     if p.suffix.lower() == ".npz":
+        d = read_npz(p, "a depth sequence")
+        if "depth" not in d:
+            raise FileFormatError(f"{p}: no 'depth' array (keys: {sorted(d)})")
+        depth_shape = d["depth"].shape
         try:
-            d = np.load(p, allow_pickle=False)
-            keys = set(d.files)
-        except Exception as e:  # zipfile/pickle/OS errors of a corrupt file
-            raise FileFormatError(f"{p}: not a readable .npz ({type(e).__name__}: {e})") from e
-        with d:
-            if "depth" not in keys:
-                raise FileFormatError(f"{p}: no 'depth' array (keys: {sorted(keys)})")
-            try:
-                depth_shape = d["depth"].shape
-                intr = d["intrinsics"] if "intrinsics" in keys else intrinsics
-                bg = d["background"] if "background" in keys else None
-                gt = d["joints"].astype(np.float64) if "joints" in keys else None
-                fps = float(d["fps"]) if "fps" in keys else 30.0
-            except Exception as e:
-                raise FileFormatError(f"{p}: corrupt .npz ({type(e).__name__}: {e})") from e
+            intr = d["intrinsics"] if "intrinsics" in d else intrinsics
+            bg = d.get("background")
+            gt = d["joints"].astype(np.float64) if "joints" in d else None
+            fps = float(d["fps"]) if "fps" in d else 30.0
+        except (TypeError, ValueError) as e:
+            raise FileFormatError(f"{p}: corrupt .npz ({type(e).__name__}: {e})") from None
         if len(depth_shape) == 2:
             raise FileFormatError(f"{p}: 'depth' is one frame {depth_shape}; expected (T, H, W)")
         if len(depth_shape) != 3 or depth_shape[0] == 0:
             raise FileFormatError(f"{p}: 'depth' must be (T, H, W), got {depth_shape}")
+        if not (np.isfinite(fps) and fps > 0):
+            raise FileFormatError(f"{p}: 'fps' must be a positive number, got {fps}")
         cam = _camera(intr if intrinsics is None else intrinsics, depth_shape[1:], p)
-        background = _to_metres(bg, depth_scale, p) if bg is not None else None
-        return Sequence(p, p.stem, "npz", depth_shape[0], cam, depth_scale, background, gt, fps)
-    first = read_depth(p, scale=depth_scale)
-    return Sequence(
-        p, p.stem, "image", 1, _camera(intrinsics, first.shape, p), depth_scale, files=[p]
-    )
+        background = _to_metres(bg, scale, p) if bg is not None else None
+        return Sequence(p, p.stem, "npz", depth_shape[0], cam, scale, background, gt, fps)
+    first = read_depth(p, scale=scale)
+    return Sequence(p, p.stem, "image", 1, _camera(intrinsics, first.shape, p), scale, files=[p])
 
 
 def expand_inputs(inputs: list[str]) -> list[Path]:

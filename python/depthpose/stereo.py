@@ -116,19 +116,27 @@ def depth_from_disparity(
 
 
 def _array(a: ArrayLike) -> object:
-    """Numpy arrays pass through (so the native checks see their dtype); array-likes
-    such as lists are converted."""
-    return a if isinstance(a, np.ndarray) else np.asarray(a)
+    """Numpy arrays pass through (so the native checks see their dtype and size before
+    any copy); lists and tuples of numbers are converted; anything else passes for the
+    native checks to refuse by name."""
+    if isinstance(a, (list, tuple)):
+        try:
+            return np.asarray(a)
+        except (ValueError, TypeError):
+            return a  # ragged: the native check names it
+    return a
 
 
 def write_pfm(path: str | Path, image: NDArray[np.float32]) -> None:
     """Writes a single-channel float image as PFM (little-endian, bottom row first);
     NaN is stored as +inf, the Middlebury convention for "unknown"."""
-    img = np.where(np.isnan(image), np.inf, image).astype("<f4")
-    h, w = img.shape
-    with open(path, "wb") as f:
-        f.write(f"Pf\n{w} {h}\n-1.0\n".encode("ascii"))
-        f.write(np.ascontiguousarray(img[::-1]).tobytes())
+    from . import _validate
+    from .io import write_pfm as _write
+
+    img = _validate.array(image, "image", image=1)
+    if img.dtype.kind != "f":
+        img = _validate.numbers_array(img, "image")
+    _write(path, np.where(np.isnan(img), np.inf, img))
 
 
 def _write_disparity(path: Path, disparity: NDArray[np.float32], max_disparity: float) -> None:
@@ -185,6 +193,12 @@ def cli_stereo(argv: list[str]) -> int:
     _write_disparity(args.out, disparity, args.max_disparity or top)
     if args.depth_out is not None:
         depth = depth_from_disparity(disparity, args.focal, args.baseline, args.doffs)
+        # A 16-bit PNG in millimetres holds up to 65.535 m: farther matches (tiny
+        # disparities) are written as 0, no reading, and counted.
+        far = depth > 65.535
+        depth = np.where(far, np.float32(0), depth)
         _core.write_depth_png(str(args.depth_out), depth)
+        if far.any():
+            print(f"{int(far.sum())} matches beyond 65.535 m written as 0 (no reading)")
     print(f"matched {matched.mean():.1%} of {disparity.shape[1]}x{disparity.shape[0]} pixels")
     return 0

@@ -11,7 +11,6 @@ import os
 import sys
 import threading
 import time
-import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from . import _core
-from ._core import Camera, FileFormatError, InvalidInputError, surface_context
+from ._core import Camera, FileFormatError, InvalidInputError, InvalidTypeError, surface_context
 
 __all__ = [
     "ARM_POSES",
@@ -80,13 +79,13 @@ def _model_shape(model: Any) -> np.ndarray | None:
     if model is None:
         return None
     if isinstance(model, np.ndarray):
-        return np.ascontiguousarray(model, dtype=np.float64)
-    for attr in ("shape_vector", "shape"):
-        v = getattr(model, attr, None)
-        if v is not None:
-            v = v() if callable(v) else v
-            return np.ascontiguousarray(np.asarray(v, dtype=np.float64).ravel())
-    raise InvalidInputError(f"model: expected a body model or 27 shape values, got {type(model)}")
+        return model  # the native check reads any dtype and layout, and names it
+    if isinstance(model, _core.BodyModel):
+        return np.asarray(model.shape, dtype=np.float64)
+    raise InvalidTypeError(
+        f"model: expected a depthpose.BodyModel or its 27 shape values (a numpy array), "
+        f"got {type(model).__name__}"
+    )
 
 
 def _progress_bar() -> Callable[[int, int], None]:
@@ -172,7 +171,13 @@ class TemplateDatabase:
         default (docs/templates.md has its effect on retrieval and on the pipeline).
         """
         if camera is not None:
+            if not isinstance(camera, Camera):
+                raise InvalidTypeError(
+                    f"camera: expected a depthpose.Camera or None, got {type(camera).__name__}"
+                )
             width, height = camera.width, camera.height
+        if not isinstance(progress, (bool, np.bool_)):
+            raise InvalidTypeError(f"progress: expected True or False, got {type(progress)}")
         shape = _model_shape(model)
         report = _progress_bar() if progress else None
         if renderer == "trimesh":
@@ -269,6 +274,8 @@ class TemplateDatabase:
     def save(self, path: str | os.PathLike) -> None:
         """Writes the database to an ``.npz`` file (format version and settings hash
         included)."""
+        if not isinstance(path, (str, os.PathLike)):
+            raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
         arrays = self._db.to_arrays()
         arrays["hash"] = np.array(arrays["hash"])
         arrays["format_version"] = np.array(arrays["format_version"])
@@ -282,25 +289,25 @@ class TemplateDatabase:
         """Reads a database written by :meth:`save`. With ``model`` or settings given,
         refuses a file built for another model or other settings; a file of another
         format version or a corrupt file raises :class:`FileFormatError`."""
+        from .io import read_npz
+
+        if not isinstance(path, (str, os.PathLike)):
+            raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
         path = Path(path)
         unknown = set(settings) - set(_SETTING_NAMES)
         if unknown:
             raise InvalidInputError(f"settings: unknown names {sorted(unknown)}")
-        try:
-            with np.load(path, allow_pickle=False) as f:
-                arrays = {k: f[k] for k in f.files}
-        except FileNotFoundError:
-            raise FileFormatError(f"{path}: no such file") from None
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-            raise FileFormatError(f"{path}: not a template database ({e})") from None
+        arrays = read_npz(path, "a template database")
         for k in ("format_version", "hash"):
             if k not in arrays:
                 raise FileFormatError(f"{path}: missing entry {k!r}; not a template database")
-        try:
-            arrays["format_version"] = int(arrays["format_version"])
-            arrays["hash"] = str(arrays["hash"])
-        except (TypeError, ValueError):
-            raise FileFormatError(f"{path}: bad format_version or hash") from None
+        version, digest = arrays["format_version"], arrays["hash"]
+        if version.shape != () or version.dtype.kind not in "iu":
+            raise FileFormatError(f"{path}: format_version is not an integer")
+        if digest.shape != () or digest.dtype.kind != "U":
+            raise FileFormatError(f"{path}: hash is not a string")
+        arrays["format_version"] = int(version)
+        arrays["hash"] = str(digest)
         shape = cfg = None
         if model is not None or settings:
             shape = _model_shape(model)

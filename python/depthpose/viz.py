@@ -8,8 +8,8 @@ from typing import Union
 
 import numpy as np
 
-from . import _core
-from ._core import InvalidInputError
+from . import _core, _validate
+from ._core import InvalidInputError, InvalidTypeError
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -53,15 +53,16 @@ PART_COLORS = np.array(
 def colorize_depth(
     depth: np.ndarray, near: float | None = None, far: float | None = None
 ) -> np.ndarray:
-    """(H, W, 3) uint8: near is bright, far is dark, no reading is black."""
-    d = np.asarray(depth, dtype=np.float32)
+    """(H, W, 3) uint8: near is bright, far is dark, no reading (0, NaN) is black.
+    ``depth``: a 2-D array of numbers (metres, or any unit with ``near``/``far`` in it)."""
+    d = _picture_values(depth, "depth")
     if d.ndim != 2:
         raise InvalidInputError(f"depth: expected a 2-D array, got shape {d.shape}")
     valid = np.isfinite(d) & (d > 0)
     if not valid.any():
         return np.zeros((*d.shape, 3), np.uint8)
-    lo = float(np.percentile(d[valid], 1)) if near is None else near
-    hi = float(np.percentile(d[valid], 99)) if far is None else far
+    lo = float(np.percentile(d[valid], 1)) if near is None else _validate.number(near, "near")
+    hi = float(np.percentile(d[valid], 99)) if far is None else _validate.number(far, "far")
     t = np.clip((hi - np.where(valid, d, hi)) / max(hi - lo, 1e-6), 0, 1)
     g = (40 + 215 * t).astype(np.uint8)
     rgb = np.stack([g, g, g], axis=-1)
@@ -69,19 +70,64 @@ def colorize_depth(
     return rgb
 
 
+def _picture_values(value: object, name: str) -> np.ndarray:
+    """A numeric array (NaN allowed) as float32, within the image size limit."""
+    a = _validate.array(value, name, image=4)
+    why = _validate._not_numbers(a.dtype)
+    if why is not None:
+        cls = InvalidInputError if a.dtype.kind == "b" else InvalidTypeError
+        raise cls(f"{name}: dtype {a.dtype}: {why}")
+    return a.astype(np.float32)
+
+
+def _rgb(rgb: object, name: str = "rgb") -> np.ndarray:
+    """An (H, W, 3) picture of integers in 0..255 (uint8 or another integer type) as
+    float32."""
+    a = _validate.array(rgb, name, image=3)
+    if a.ndim != 3 or a.shape[2] != 3:
+        raise InvalidInputError(f"{name}: expected an (H, W, 3) picture, got shape {a.shape}")
+    if a.dtype.kind not in "iu":
+        raise (InvalidInputError if a.dtype.kind in "fb" else InvalidTypeError)(
+            f"{name}: expected integers 0..255 (uint8), got dtype {a.dtype}"
+        )
+    if a.size and (a.min() < 0 or a.max() > 255):
+        raise InvalidInputError(f"{name}: values must be in 0..255")
+    return a.astype(np.float32)
+
+
+def _alpha(alpha: object) -> float:
+    return _validate.number(alpha, "alpha", low=0.0, high=1.0)
+
+
+def _color(color: object) -> np.ndarray:
+    c = np.asarray(color) if isinstance(color, (tuple, list)) else color
+    c = _validate.numbers_array(c, "color", ndim=1)
+    if c.shape != (3,) or (c < 0).any() or (c > 255).any():
+        raise InvalidInputError(f"color: expected (r, g, b) in 0..255, got {color!r}")
+    return c.astype(np.float32)
+
+
 def overlay_mask(
     rgb: np.ndarray, mask: np.ndarray, color: tuple[int, int, int] = (60, 200, 90), alpha=0.5
 ) -> np.ndarray:
-    """Tints the pixels of ``mask`` in ``color``."""
-    out = rgb.astype(np.float32).copy()
-    out[mask] = (1 - alpha) * out[mask] + alpha * np.asarray(color, np.float32)
+    """Tints the pixels of ``mask`` (H, W) in ``color``. ``mask`` is a bool array (or
+    integers 0 and 1), as everywhere in depthpose: an integer mask is not an index."""
+    out = _rgb(rgb)
+    m = _validate.mask(mask, out.shape[:2])
+    a = _alpha(alpha)
+    out[m] = (1 - a) * out[m] + a * _color(color)
     return out.astype(np.uint8)
 
 
 def overlay_labels(rgb: np.ndarray, labels: np.ndarray, alpha: float = 0.6) -> np.ndarray:
-    """Colours each labelled pixel (label >= 0) by its part."""
-    out = rgb.astype(np.float32).copy()
-    lab = np.asarray(labels)
+    """Colours each labelled pixel (label >= 0; labels (H, W) integers) by its part."""
+    out = _rgb(rgb)
+    lab = _validate.array(labels, "labels", image=1)
+    if lab.shape != out.shape[:2]:
+        raise InvalidInputError(f"labels: shape {lab.shape} does not match {out.shape[:2]}")
+    if lab.dtype.kind not in "iu":
+        raise InvalidInputError(f"labels: expected integer labels, got dtype {lab.dtype}")
+    alpha = _alpha(alpha)
     on = lab >= 0
     colors = PART_COLORS[lab[on] % len(PART_COLORS)].astype(np.float32)
     out[on] = (1 - alpha) * out[on] + alpha * colors
@@ -90,9 +136,15 @@ def overlay_labels(rgb: np.ndarray, labels: np.ndarray, alpha: float = 0.6) -> n
 
 def montage(images: list[np.ndarray], columns: int = 4, pad: int = 2) -> np.ndarray:
     """Tiles equally sized (H, W, 3) images into one picture."""
-    if not images:
-        raise InvalidInputError("images: need at least one image")
+    if not isinstance(images, (list, tuple)) or not images:
+        raise InvalidInputError("images: need a list of at least one image")
+    columns = _validate.integer(columns, "columns", low=1, high=4096)
+    pad = _validate.integer(pad, "pad", low=0, high=4096)
+    images = [_rgb(im, f"images[{k}]").astype(np.uint8) for k, im in enumerate(images)]
     h, w = images[0].shape[:2]
+    for k, im in enumerate(images):
+        if im.shape[:2] != (h, w):
+            raise InvalidInputError(f"images[{k}]: shape {im.shape} differs from {(h, w, 3)}")
     rows = (len(images) + columns - 1) // columns
     out = np.zeros((rows * (h + pad) - pad, columns * (w + pad) - pad, 3), np.uint8)
     for k, im in enumerate(images):
@@ -102,8 +154,10 @@ def montage(images: list[np.ndarray], columns: int = 4, pad: int = 2) -> np.ndar
 
 
 def save_png(path: PathLike, rgb: np.ndarray) -> None:
-    """Writes an (H, W, 3) uint8 image as PNG."""
-    _core.write_rgb_png(os.fspath(path), np.ascontiguousarray(rgb, dtype=np.uint8))
+    """Writes an (H, W, 3) picture (integers 0..255, e.g. uint8) as PNG."""
+    if not isinstance(path, (str, os.PathLike)):
+        raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
+    _core.write_rgb_png(os.fspath(path), rgb)
 
 
 #: Bones of the 15-joint skeleton (ITOP order), as joint index pairs.
@@ -119,9 +173,12 @@ _JOINT_SIDE = "CCRLRLRLCRLRLRL"
 
 def _line(rgb: np.ndarray, a, b, color, width: int = 1) -> None:
     h, w = rgb.shape[:2]
-    n = int(max(abs(b[0] - a[0]), abs(b[1] - a[1]))) + 1
-    if not np.isfinite([*a, *b]).all() or n > 4 * (h + w):
+    if not np.isfinite([*a, *b]).all():
         return
+    span = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
+    if span > 4 * (h + w):
+        return
+    n = int(span) + 1
     us = np.linspace(a[0], b[0], n)
     vs = np.linspace(a[1], b[1], n)
     for du in range(-(width // 2), width // 2 + 1):
@@ -133,9 +190,20 @@ def _line(rgb: np.ndarray, a, b, color, width: int = 1) -> None:
 
 
 def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -> np.ndarray:
-    """Draws the 15-joint skeleton (camera frame, metres) projected into the picture."""
-    out = rgb.copy()
-    joints = np.asarray(joints, np.float64)
+    """Draws the 15-joint skeleton (joints (15, 3), camera frame, metres; NaN joints
+    are left out) projected into the picture."""
+    out = _rgb(rgb).astype(np.uint8)
+    if not isinstance(camera, _core.Camera):
+        raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(camera)}")
+    width = _validate.integer(width, "width", low=1, high=64)
+    j = _validate.array(
+        np.asarray(joints) if isinstance(joints, (list, tuple)) else joints, "joints"
+    )
+    if j.shape != (15, 3) or _validate._not_numbers(j.dtype) is not None:
+        raise InvalidInputError(f"joints: expected (15, 3) numbers, got {j.shape} {j.dtype}")
+    joints = j.astype(np.float64)
+    if np.isinf(joints).any():
+        raise InvalidInputError("joints: holds an infinite value")
     if not np.isfinite(joints).any():
         return out
     uv = camera.project(np.nan_to_num(joints, nan=0.0))
@@ -181,8 +249,11 @@ def save_gif(path: PathLike, pictures: list[np.ndarray], fps: float = 10.0) -> N
     """An animated GIF of (H, W, 3) uint8 pictures (Pillow, which matplotlib brings)."""
     from PIL import Image
 
-    if not pictures:
-        raise InvalidInputError("pictures: need at least one picture")
-    frames = [Image.fromarray(np.ascontiguousarray(p, dtype=np.uint8)) for p in pictures]
+    if not isinstance(pictures, (list, tuple)) or not pictures:
+        raise InvalidInputError("pictures: need a list of at least one picture")
+    fps = _validate.number(fps, "fps", low=0.0, low_open=True, high=1000.0)
+    frames = [
+        Image.fromarray(_rgb(p, f"pictures[{k}]").astype(np.uint8)) for k, p in enumerate(pictures)
+    ]
     frames[0].save(os.fspath(path), save_all=True, append_images=frames[1:],
                    duration=int(1000 / fps), loop=0)  # fmt: skip

@@ -46,6 +46,11 @@ pub trait Cost: Capacity {
             ok & u.is_finite_value() & (u != Self::FORBIDDEN)
         })
     }
+    /// [`Self::all_plain`] and, for floats, the largest |value| (meaningful when all
+    /// are plain; 0 for integers, whose range is checked exactly).
+    fn plain_and_max_abs(values: &[Self]) -> (bool, f64) {
+        (Self::all_plain(values), 0.0)
+    }
 }
 
 impl Cost for f64 {
@@ -63,6 +68,26 @@ impl Cost for f64 {
         }
         let rest = chunks.remainder().iter().fold(0.0, |s, &x| s + x * 0.0);
         lanes.iter().sum::<f64>() + rest == 0.0
+    }
+    fn plain_and_max_abs(values: &[f64]) -> (bool, f64) {
+        // One pass for both (the costs are read once): the sums of x · 0 as in
+        // `all_plain`, and the largest |x| per lane.
+        let (mut zero, mut most) = ([0.0f64; 8], [0.0f64; 8]);
+        let mut chunks = values.chunks_exact(8);
+        for c in &mut chunks {
+            for k in 0..8 {
+                zero[k] += c[k] * 0.0;
+                let a = c[k].abs();
+                most[k] = if a > most[k] { a } else { most[k] };
+            }
+        }
+        let rest = chunks.remainder();
+        let plain = zero.iter().sum::<f64>() + rest.iter().fold(0.0, |s, &x| s + x * 0.0) == 0.0;
+        let max = rest
+            .iter()
+            .chain(&most)
+            .fold(0.0f64, |m, &x| m.max(x.abs()));
+        (plain, max)
     }
 }
 
@@ -180,7 +205,7 @@ fn check_problem<'a, C: Cost>(
     })?;
     // One branch-free (vectorised) pass settles the common case: every cost finite and
     // none forbidden. Only otherwise are the costs searched for the bad or forbidden.
-    let plain = C::all_plain(p.unary);
+    let (plain, umax) = C::plain_and_max_abs(p.unary);
     if let Some(k) = (!plain)
         .then(|| {
             p.unary
@@ -289,6 +314,8 @@ fn check_problem<'a, C: Cost>(
                          smaller units or float costs",
                     )
                 })?;
+        } else {
+            check_float_range(umax, n, p.weights, &v)?;
         }
         C::ZERO
     } else {
@@ -385,6 +412,44 @@ fn energy_bound<C: Cost>(unary: &[C], l: usize, weights: &[C], v: &[C]) -> Optio
         total = total.checked_add(w.mul(vmax)?)?;
     }
     Some(total)
+}
+
+/// Float costs: refuses a problem whose energies or move-graph flows could overflow to
+/// infinity (weights × pairwise near the float range, or many huge costs). An
+/// infinite capacity never saturates, so a max-flow on it would not end; energies
+/// would not compare. Bounds every energy by n · max|unary| (`umax`) + Σ weights ·
+/// max V (a cheap upper bound of [`energy_bound`]) and asks for head-room of 4.
+fn check_float_range<C: Cost>(umax: f64, n: usize, weights: &[C], v: &[C]) -> Result<()> {
+    let vmax = v.iter().map(|x| x.to_f64()).fold(0.0, f64::max);
+    // Eight lanes vectorise the sum (the weights are known finite and >= 0).
+    let mut lanes = [0.0f64; 8];
+    let mut chunks = weights.chunks_exact(8);
+    for c in &mut chunks {
+        for (lane, &w) in lanes.iter_mut().zip(c) {
+            *lane += w.to_f64();
+        }
+    }
+    let wsum =
+        lanes.iter().sum::<f64>() + chunks.remainder().iter().map(|w| w.to_f64()).sum::<f64>();
+    let pairs = wsum * vmax;
+    ensure((4.0 * pairs).is_finite(), "weights", || {
+        format!(
+            "weights × pairwise costs reach {} (sum of weights {} times the largest \
+             pairwise value {}), too close to the float64 range for a graph cut; scale the \
+             costs down",
+            crate::error::brief(pairs),
+            crate::error::brief(wsum),
+            crate::error::brief(vmax)
+        )
+    })?;
+    let bound = 1.0 + n as f64 * umax + pairs;
+    ensure((4.0 * bound).is_finite(), "unary", || {
+        format!(
+            "costs too large for a graph cut (the largest |unary| {} over {n} nodes passes \
+             the float64 range); scale the costs down",
+            crate::error::brief(umax)
+        )
+    })
 }
 
 /// A cost larger than the energy of any labelling without forbidden labels, so that a
@@ -1685,6 +1750,62 @@ mod tests {
 
     /// Integer costs whose energies could pass int64 are refused (they used to wrap:
     /// four nodes at 2⁶² each reported energy 0); the largest safe ones still solve.
+    #[test]
+    fn float_costs_that_could_overflow_are_refused_not_looped_on() {
+        // weights × pairwise overflows to inf: once a max-flow that never ended.
+        let unary = [3.18, 1.35, 0.20, 0.08];
+        let v2 = [0.0, 2.0, 2.0, 0.0];
+        let v3 = [0.0, 2.0, 2.0, 2.0, 0.0, 2.0, 2.0, 2.0, 0.0];
+        let unary3 = [3.18, 1.35, 0.5, 0.20, 0.08, 0.7];
+        for (u, l, v) in [(&unary[..], 2, &v2[..]), (&unary3[..], 3, &v3[..])] {
+            for weights in [[1e308], [f64::MAX / 3.0]] {
+                let p = CrfProblem {
+                    unary: u,
+                    n_labels: l,
+                    edges: &[[0, 1]],
+                    weights: &weights,
+                    pairwise: Some(v),
+                };
+                let cfg = MoveConfig { max_cycles: 1 };
+                for r in [
+                    alpha_expansion(&p, None, &cfg).err(),
+                    alpha_beta_swap(&p, None, &cfg).err(),
+                    energy(&p, &[0, 1]).err(),
+                ] {
+                    assert!(
+                        matches!(r, Some(Error::InvalidArgument { ref name, .. }) if name == "weights"),
+                        "{r:?}"
+                    );
+                }
+            }
+        }
+        // Huge unary costs over many nodes: the energy could pass the float range.
+        let n = 8;
+        let u: Vec<f64> = (0..2 * n)
+            .map(|k| if k % 2 == 0 { 1e308 } else { 0.0 })
+            .collect();
+        let p = CrfProblem {
+            unary: &u,
+            n_labels: 2,
+            edges: &[],
+            weights: &[],
+            pairwise: None,
+        };
+        let r = alpha_expansion(&p, None, &MoveConfig::default());
+        assert!(matches!(r, Err(Error::InvalidArgument { ref name, .. }) if name == "unary"));
+        // Large but safe costs still solve, with a finite energy.
+        let w = [1e300];
+        let p = CrfProblem {
+            unary: &unary,
+            n_labels: 2,
+            edges: &[[0, 1]],
+            weights: &w,
+            pairwise: Some(&v2),
+        };
+        let r = alpha_expansion(&p, None, &MoveConfig::default()).unwrap();
+        assert!(r.energy.is_finite());
+    }
+
     #[test]
     fn integer_costs_that_could_overflow_are_refused() {
         let big = 1i64 << 62;

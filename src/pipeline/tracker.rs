@@ -358,6 +358,8 @@ fn error_text(e: &Error) -> String {
         Error::InvalidArgument { .. } => "InvalidInputError",
         Error::File { .. } => "FileFormatError",
         Error::NoBody(_) => "NoBodyError",
+        Error::NotFound { .. } => "MissingFileError",
+        Error::ResourceLimit { .. } => "ResourceLimitError",
     };
     format!("{kind}: {e}")
 }

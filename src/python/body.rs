@@ -1,17 +1,18 @@
 //! `BodyModel` for Python: kinematics, distances, Jacobians, rendering, meshes.
 
-use super::arrays::{bool_array, depth_array};
-use super::arrays::{count, f32_array, f64_array, i64_array, to_numpy};
-use super::camera::PyCamera;
-use super::fit::{PyFitConfig, PyShapeFitResult};
-use super::native;
+use super::convert::{
+    bool_array, camera as camera_arg, check_fit_points, check_image_pixels, check_result_bytes,
+    depth_array, f32_array, f64_array, fit_config, i64_array, invalid, to_numpy, Int, Real,
+};
+use super::fit::PyShapeFitResult;
+use super::{native, native_ok};
 use crate::body::superquadric::MeshConfig;
 use crate::body::{
     pose_from_slice, pose_with_root_increment, BodyModel, BodyShape, Pose, JOINT_NAMES, NUM_JOINTS,
     NUM_PARAMS, NUM_SEGMENTS, PARAM_NAMES, PART_NAMES, SHAPE_FACTOR_NAMES, SHAPE_PARAM_NAMES,
 };
 use crate::error::Error;
-use crate::fit::{self, FitConfig, ShapeConfig, ShapeFrame};
+use crate::fit::{self, ShapeConfig, ShapeFrame};
 use numpy::{PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
@@ -30,11 +31,10 @@ pub(super) fn pose_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Pose> {
 pub(super) fn poses_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<Pose>> {
     let a = f64_array(obj, name, Some(2), false)?;
     if a.shape[1] != NUM_PARAMS {
-        return Err(Error::invalid(
+        return Err(invalid(
             name,
             format!("expected shape (K, {NUM_PARAMS}), got {:?}", a.shape),
-        )
-        .into());
+        ));
     }
     Ok(a.data
         .chunks(NUM_PARAMS)
@@ -46,14 +46,18 @@ pub(super) fn poses_arg(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<Pose>> {
 fn points_arg(obj: &Bound<PyAny>) -> PyResult<Vec<[f32; 3]>> {
     let a = f32_array(obj, "points", Some(2), true)?;
     if a.shape[1] != 3 {
-        return Err(Error::invalid(
+        return Err(invalid(
             "points",
             format!("expected shape (N, 3), got {:?}", a.shape),
-        )
-        .into());
+        ));
     }
     Ok(a.data.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect())
 }
+
+/// Most frames one shape calibration takes.
+const MAX_FRAMES: usize = 1024;
+/// Most rounds (and LM iterations per round) of a shape calibration.
+const MAX_ROUNDS: i128 = 100_000;
 
 /// The items of a per-frame argument: a list/tuple of arrays or an array whose first
 /// axis is the frame (`ndim` = dimensions of the stacked array).
@@ -64,14 +68,19 @@ fn frame_items<'py>(
 ) -> PyResult<Vec<Bound<'py, PyAny>>> {
     let items: Vec<Bound<'py, PyAny>> = if let Ok(arr) = obj.cast::<PyUntypedArray>() {
         if arr.ndim() != ndim {
-            return Err(Error::invalid(
+            return Err(invalid(
                 name,
                 format!(
                     "expected a list of frames or a {ndim}-D array, got shape {:?}",
                     arr.shape()
                 ),
-            )
-            .into());
+            ));
+        }
+        if arr.shape()[0] > MAX_FRAMES {
+            return Err(super::convert::too_large(
+                name,
+                format!("more than {MAX_FRAMES} frames"),
+            ));
         }
         (0..arr.shape()[0])
             .map(|i| obj.get_item(i))
@@ -79,6 +88,12 @@ fn frame_items<'py>(
     } else if obj.is_instance_of::<pyo3::types::PyList>()
         || obj.is_instance_of::<pyo3::types::PyTuple>()
     {
+        if obj.len()? > MAX_FRAMES {
+            return Err(super::convert::too_large(
+                name,
+                format!("more than {MAX_FRAMES} frames"),
+            ));
+        }
         obj.try_iter()?.collect::<PyResult<_>>()?
     } else {
         let ty = obj
@@ -86,14 +101,14 @@ fn frame_items<'py>(
             .name()
             .map(|n| n.to_string())
             .unwrap_or_else(|_| "?".into());
-        return Err(Error::invalid(
+        return Err(super::convert::wrong_type(
             name,
-            format!("expected a list of arrays or a numpy array, got {ty}"),
-        )
-        .into());
+            "a list of arrays or a numpy array",
+            &ty,
+        ));
     };
     if items.is_empty() {
-        return Err(Error::invalid(name, "needs at least one frame").into());
+        return Err(invalid(name, "needs at least one frame"));
     }
     Ok(items)
 }
@@ -110,10 +125,10 @@ pub struct PyBodyModel {
 impl PyBodyModel {
     /// A body `height` metres tall with reference proportions.
     #[new]
-    #[pyo3(signature = (height=1.75))]
-    fn new(height: f64) -> PyResult<Self> {
+    #[pyo3(signature = (height=Real::new(1.75)))]
+    fn new(height: Real) -> PyResult<Self> {
         Ok(PyBodyModel {
-            inner: BodyModel::new(height)?,
+            inner: BodyModel::new(height.get("height")?)?,
         })
     }
 
@@ -139,17 +154,17 @@ impl PyBodyModel {
     }
     /// Lower bounds of the pose (22,), -inf for the free root.
     #[getter]
-    fn lower_bounds<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn lower_bounds<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, BodyModel::lower_bounds().to_vec(), &[NUM_PARAMS])
     }
     /// Upper bounds of the pose (22,), +inf for the free root.
     #[getter]
-    fn upper_bounds<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn upper_bounds<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, BodyModel::upper_bounds().to_vec(), &[NUM_PARAMS])
     }
     /// The shape parameters (metres) in `shape_names` order.
     #[getter]
-    fn get_shape<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn get_shape<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let v = self.inner.shape.to_vec();
         to_numpy(py, v.to_vec(), &[v.len()])
     }
@@ -170,7 +185,7 @@ impl PyBodyModel {
 
     /// Upright, facing the camera, arms down, hip centre 3 m ahead (22,).
     #[staticmethod]
-    fn neutral_pose<'py>(py: Python<'py>) -> F64Array<'py> {
+    fn neutral_pose<'py>(py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, BodyModel::neutral_pose().to_vec(), &[NUM_PARAMS])
     }
 
@@ -181,11 +196,7 @@ impl PyBodyModel {
         pose: &Bound<'py, PyAny>,
     ) -> PyResult<F64Array<'py>> {
         let p = pose_arg(pose, "pose")?;
-        Ok(to_numpy(
-            py,
-            BodyModel::clamp_pose(&p).to_vec(),
-            &[NUM_PARAMS],
-        ))
+        to_numpy(py, BodyModel::clamp_pose(&p).to_vec(), &[NUM_PARAMS])
     }
 
     /// `pose` with its root rotation R replaced by R·exp([omega]x) (body-frame increment,
@@ -199,13 +210,14 @@ impl PyBodyModel {
         let p = pose_arg(pose, "pose")?;
         let w = f64_array(omega, "omega", Some(1), true)?;
         if w.data.len() != 3 {
-            return Err(
-                Error::invalid("omega", format!("needs 3 values, got {}", w.data.len())).into(),
-            );
+            return Err(invalid(
+                "omega",
+                format!("needs 3 values, got {}", w.data.len()),
+            ));
         }
         let q =
             pose_with_root_increment(&p, &nalgebra::Vector3::new(w.data[0], w.data[1], w.data[2]));
-        Ok(to_numpy(py, q.to_vec(), &[NUM_PARAMS]))
+        to_numpy(py, q.to_vec(), &[NUM_PARAMS])
     }
 
     /// Segment frame → camera transforms (16, 4, 4).
@@ -225,7 +237,7 @@ impl PyBodyModel {
                 }
             }
         }
-        Ok(to_numpy(py, out, &[NUM_SEGMENTS, 4, 4]))
+        to_numpy(py, out, &[NUM_SEGMENTS, 4, 4])
     }
 
     /// The 15 joints (15, 3) in the camera frame, ITOP order.
@@ -233,7 +245,7 @@ impl PyBodyModel {
         let p = pose_arg(pose, "pose")?;
         let j = self.inner.joints(&p);
         let out: Vec<f64> = j.iter().flat_map(|v| [v.x, v.y, v.z]).collect();
-        Ok(to_numpy(py, out, &[NUM_JOINTS, 3]))
+        to_numpy(py, out, &[NUM_JOINTS, 3])
     }
 
     /// d(joints)/d(pose) as (15, 3, 22); root rotation columns are body-frame increments.
@@ -245,7 +257,7 @@ impl PyBodyModel {
         let p = pose_arg(pose, "pose")?;
         let mut out = [0.0; NUM_JOINTS * 3 * NUM_PARAMS];
         self.inner.joints_jacobian(&p, &mut out);
-        Ok(to_numpy(py, out.to_vec(), &[NUM_JOINTS, 3, NUM_PARAMS]))
+        to_numpy(py, out.to_vec(), &[NUM_JOINTS, 3, NUM_PARAMS])
     }
 
     /// Signed distances (N, 16) float32 of points (N, 3) to every segment ellipsoid
@@ -258,11 +270,17 @@ impl PyBodyModel {
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
         pose: &Bound<'py, PyAny>,
-        cap: Option<f64>,
+        cap: Option<Real>,
     ) -> PyResult<F32Array<'py>> {
+        let cap = cap.map(|c| c.get("cap")).transpose()?;
         let pts = points_arg(points)?;
         let p = pose_arg(pose, "pose")?;
         let n = pts.len();
+        check_result_bytes(
+            n.checked_mul(NUM_SEGMENTS * 4),
+            "points",
+            "the distances (N, 16)",
+        )?;
         let out = native(py, || -> crate::Result<Vec<f32>> {
             let mut out = vec![0.0f32; n * NUM_SEGMENTS];
             match cap {
@@ -271,7 +289,7 @@ impl PyBodyModel {
             }
             Ok(out)
         })?;
-        Ok(to_numpy(py, out, &[n, NUM_SEGMENTS]))
+        to_numpy(py, out, &[n, NUM_SEGMENTS])
     }
 
     /// Residuals (N,) = signed distance of each point to its labelled segment (label -1:
@@ -286,12 +304,16 @@ impl PyBodyModel {
         let pts = points_arg(points)?;
         let lab = i64_array(labels, "labels", Some(1))?;
         if lab.data.len() != pts.len() {
-            return Err(Error::invalid(
+            return Err(invalid(
                 "labels",
                 format!("has {} entries for {} points", lab.data.len(), pts.len()),
-            )
-            .into());
+            ));
         }
+        check_result_bytes(
+            pts.len().checked_mul((NUM_PARAMS + 1) * 8),
+            "points",
+            "the residuals and Jacobian (N, 22)",
+        )?;
         let lab: Vec<i32> = lab
             .data
             .iter()
@@ -305,7 +327,7 @@ impl PyBodyModel {
                 .residuals_and_jacobian(&pts, &lab, &p, &mut r, &mut j)?;
             Ok((r, j))
         })?;
-        Ok((to_numpy(py, r, &[n]), to_numpy(py, j, &[n, NUM_PARAMS])))
+        Ok((to_numpy(py, r, &[n])?, to_numpy(py, j, &[n, NUM_PARAMS])?))
     }
 
     /// How badly each of `poses` (K, 22) explains the observed body in `depth` (H, W;
@@ -313,28 +335,29 @@ impl PyBodyModel {
     /// pixel by pixel (depth difference capped at `cap` metres; a foreground pixel with
     /// nothing rendered or a rendered pixel outside the mask costs `cap`), divided by
     /// `cap` × the foreground pixel count. (K,) float64, the poses rendered in parallel.
-    #[pyo3(signature = (poses, depth, mask, camera, cap=0.1))]
+    #[pyo3(signature = (poses, depth, mask, camera, cap=Real::new(0.1)))]
     fn depth_discrepancies<'py>(
         &self,
         py: Python<'py>,
         poses: &Bound<'py, PyAny>,
         depth: &Bound<'py, PyAny>,
         mask: &Bound<'py, PyAny>,
-        camera: &PyCamera,
-        cap: f64,
+        camera: &Bound<'py, PyAny>,
+        cap: Real,
     ) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+        let cam = camera_arg(camera, "camera")?;
+        let cap = cap.get("cap")?;
         let d = depth_array(depth, "depth")?;
         let (h, w) = (d.shape[0], d.shape[1]);
-        camera.inner.check_image("depth", h, w)?;
+        cam.check_image("depth", h, w)?;
         let m = bool_array(mask, "mask", &[h, w])?;
         let poses = poses_arg(poses, "poses")?;
-        let cam = camera.inner;
         let out = native(py, || {
             self.inner
                 .depth_discrepancies(&poses, &cam, &d.data, &m, cap)
         })?;
         let k = out.len();
-        Ok(to_numpy(py, out, &[k]))
+        to_numpy(py, out, &[k])
     }
 
     /// Depth (H, W) float32 metres (0 = background) and part labels (H, W) int16
@@ -343,41 +366,43 @@ impl PyBodyModel {
         &self,
         py: Python<'py>,
         pose: &Bound<'py, PyAny>,
-        camera: &PyCamera,
+        camera: &Bound<'py, PyAny>,
     ) -> PyResult<(F32Array<'py>, I16Array<'py>)> {
+        let cam = camera_arg(camera, "camera")?;
+        check_image_pixels(cam.height, cam.width, "camera")?;
         let p = pose_arg(pose, "pose")?;
-        let cam = camera.inner;
-        let (d, l) = native(py, || self.inner.render_depth(&p, &cam));
+        let (d, l) = native_ok(py, || self.inner.render_depth(&p, &cam))?;
         let shape = [cam.height, cam.width];
-        Ok((to_numpy(py, d, &shape), to_numpy(py, l, &shape)))
+        Ok((to_numpy(py, d, &shape)?, to_numpy(py, l, &shape)?))
     }
 
     /// Super-quadric surface meshes of the 16 segments, posed in the camera frame:
     /// a list of (vertices (V, 3) float64, faces (F, 3) int64), outward faces.
-    #[pyo3(signature = (pose, rings=20, sectors=24))]
+    #[pyo3(signature = (pose, rings=Int::new(20), sectors=Int::new(24)))]
     fn superquadric_meshes<'py>(
         &self,
         py: Python<'py>,
         pose: &Bound<'py, PyAny>,
-        rings: i128,
-        sectors: i128,
+        rings: Int,
+        sectors: Int,
     ) -> PyResult<Vec<(F64Array<'py>, I64Array<'py>)>> {
-        let (rings, sectors) = (count(rings, "rings")?, count(sectors, "sectors")?);
+        let (rings, sectors) = (rings.count("rings")?, sectors.count("sectors")?);
+        check_mesh_bytes(rings, sectors, NUM_SEGMENTS)?;
         let p = pose_arg(pose, "pose")?;
         let meshes = native(py, || {
             self.inner
                 .superquadric_meshes(&p, &MeshConfig { rings, sectors })
         })?;
-        Ok(meshes
+        meshes
             .into_iter()
             .map(|m| {
                 let nv = m.vertices.len();
                 let nf = m.faces.len();
                 let v: Vec<f64> = m.vertices.into_iter().flatten().collect();
                 let f: Vec<i64> = m.faces.into_iter().flatten().map(|i| i as i64).collect();
-                (to_numpy(py, v, &[nv, 3]), to_numpy(py, f, &[nf, 3]))
+                Ok((to_numpy(py, v, &[nv, 3])?, to_numpy(py, f, &[nf, 3])?))
             })
-            .collect())
+            .collect()
     }
 
     /// Ellipsoids of the posed body: centres (16, 3), rotations (16, 3, 3) (ellipsoid →
@@ -403,9 +428,9 @@ impl PyBodyModel {
             e.extend(pe.prepared.radii().iter());
         }
         Ok((
-            to_numpy(py, c, &[NUM_SEGMENTS, 3]),
-            to_numpy(py, r, &[NUM_SEGMENTS, 3, 3]),
-            to_numpy(py, e, &[NUM_SEGMENTS, 3]),
+            to_numpy(py, c, &[NUM_SEGMENTS, 3])?,
+            to_numpy(py, r, &[NUM_SEGMENTS, 3, 3])?,
+            to_numpy(py, e, &[NUM_SEGMENTS, 3])?,
         ))
     }
 
@@ -429,23 +454,30 @@ impl PyBodyModel {
     /// optional person masks. Alternates per-frame pose/label fits (hard EM) with a
     /// joint Levenberg-Marquardt over the shape factors and all poses for `iterations`
     /// rounds at most. Returns a `ShapeFitResult` (`model`, `factors`, `poses`, ...).
-    #[pyo3(signature = (depths, camera, poses, *, masks=None, iterations=3, config=None,
-        lm_iterations=20, prior_weight=1e5, bounds=(0.7, 1.4)))]
+    #[pyo3(signature = (depths, camera, poses, *, masks=None, iterations=Int::new(3), config=None,
+        lm_iterations=Int::new(20), prior_weight=Real::new(1e5), bounds=None))]
     #[allow(clippy::too_many_arguments)]
     fn fit_shape(
         &self,
         py: Python<'_>,
         depths: &Bound<'_, PyAny>,
-        camera: &PyCamera,
+        camera: &Bound<'_, PyAny>,
         poses: &Bound<'_, PyAny>,
         masks: Option<&Bound<'_, PyAny>>,
-        iterations: i128,
-        config: Option<&PyFitConfig>,
-        lm_iterations: i128,
-        prior_weight: f64,
-        bounds: (f64, f64),
+        iterations: Int,
+        config: Option<&Bound<'_, PyAny>>,
+        lm_iterations: Int,
+        prior_weight: Real,
+        bounds: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<PyShapeFitResult> {
-        let cam = camera.inner;
+        let cam = camera_arg(camera, "camera")?;
+        let bounds = match bounds {
+            None => (0.7, 1.4),
+            Some(b) => {
+                let v = super::convert::reals(b, "bounds", Some(2))?;
+                (v[0], v[1])
+            }
+        };
         let (h, w) = (cam.height, cam.width);
         let depth_items = frame_items(depths, "depths", 3)?;
         let mut ds = Vec::with_capacity(depth_items.len());
@@ -457,15 +489,14 @@ impl PyBodyModel {
         }
         let pose_items = frame_items(poses, "poses", 2)?;
         if pose_items.len() != ds.len() {
-            return Err(Error::invalid(
+            return Err(invalid(
                 "poses",
                 format!(
                     "has {} poses for {} depth frames",
                     pose_items.len(),
                     ds.len()
                 ),
-            )
-            .into());
+            ));
         }
         let mut ps: Vec<Pose> = Vec::with_capacity(ds.len());
         for (i, p) in pose_items.iter().enumerate() {
@@ -476,11 +507,10 @@ impl PyBodyModel {
             Some(m) => {
                 let items = frame_items(m, "masks", 3)?;
                 if items.len() != ds.len() {
-                    return Err(Error::invalid(
+                    return Err(invalid(
                         "masks",
                         format!("has {} masks for {} depth frames", items.len(), ds.len()),
-                    )
-                    .into());
+                    ));
                 }
                 Some(
                     items
@@ -491,17 +521,18 @@ impl PyBodyModel {
                 )
             }
         };
-        let count = |v: i128, name: &str| super::arrays::count_at_least(v, 1, name);
+        let mut points = 0;
+        for (i, d) in ds.iter().enumerate() {
+            let m = ms.as_ref().map(|m| m[i].as_slice());
+            points = check_fit_points(d, m, points, "depths")?;
+        }
         let cfg = ShapeConfig {
-            fit: match config {
-                Some(c) => c.to_rust()?,
-                None => FitConfig::default(),
-            },
-            rounds: count(iterations, "iterations")?,
-            lm_iterations: count(lm_iterations, "lm_iterations")?,
+            fit: fit_config(config, "config")?,
+            rounds: iterations.in_range(1, MAX_ROUNDS, "iterations")? as usize,
+            lm_iterations: lm_iterations.in_range(1, MAX_ROUNDS, "lm_iterations")? as usize,
             lower: bounds.0,
             upper: bounds.1,
-            prior_weight,
+            prior_weight: prior_weight.get("prior_weight")?,
             ..ShapeConfig::default()
         };
         cfg.validate().map_err(|e| match e {
@@ -535,6 +566,20 @@ impl PyBodyModel {
             self.inner.shape.standing_height()
         )
     }
+}
+
+/// Refuses meshes of `rings` × `sectors` divisions for `segments` segments whose
+/// vertices and faces (with the copies made for Python) pass [`MAX_RESULT_BYTES`].
+///
+/// [`MAX_RESULT_BYTES`]: super::convert::MAX_RESULT_BYTES
+pub(super) fn check_mesh_bytes(rings: usize, sectors: usize, segments: usize) -> PyResult<()> {
+    // Per division a vertex (3 float64) and two faces (6 int64), each also copied once.
+    let bytes = rings
+        .checked_mul(sectors)
+        .and_then(|d| d.checked_add(2 * rings + 2))
+        .and_then(|d| d.checked_mul(segments))
+        .and_then(|d| d.checked_mul(2 * (24 + 48)));
+    check_result_bytes(bytes, "rings/sectors", "the meshes")
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,8 +1,35 @@
 //! `Camera` for Python.
 
-use super::native;
+use super::convert::{f64_array, ints, invalid, reals, to_numpy, Int, Real};
+use super::native_ok;
 use crate::camera::Camera;
+use crate::error::brief;
 use pyo3::prelude::*;
+
+/// Smallest focal length accepted, in pixels (a camera with a focal length of a
+/// thousandth of a pixel would see all of space in one pixel).
+const MIN_FOCAL: f64 = 1e-3;
+/// Largest focal length accepted, in pixels.
+const MAX_FOCAL: f64 = 1e7;
+
+/// Refuses a focal length outside [`MIN_FOCAL`, `MAX_FOCAL`] (denormal or absurd
+/// intrinsics that would turn every back-projection into garbage).
+fn check_focal(camera: &Camera) -> PyResult<()> {
+    for (name, f) in [("fx", camera.fx), ("fy", camera.fy)] {
+        if !(MIN_FOCAL..=MAX_FOCAL).contains(&f) {
+            return Err(invalid(
+                name,
+                format!(
+                    "focal length must be in [{}, {}] pixels, got {}",
+                    brief(MIN_FOCAL),
+                    brief(MAX_FOCAL),
+                    brief(f)
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
 
 #[pyclass(name = "Camera", module = "depthpose._core", frozen, eq)]
 #[derive(Clone, PartialEq)]
@@ -14,18 +41,17 @@ pub struct PyCamera {
 impl PyCamera {
     #[new]
     #[pyo3(signature = (fx, fy, cx, cy, width, height))]
-    fn new(fx: f64, fy: f64, cx: f64, cy: f64, width: i128, height: i128) -> PyResult<Self> {
-        let size = |v: i128, n: &str| super::arrays::count_at_least(v, 1, n);
-        Ok(PyCamera {
-            inner: Camera::new(
-                fx,
-                fy,
-                cx,
-                cy,
-                size(width, "width")?,
-                size(height, "height")?,
-            )?,
-        })
+    fn new(fx: Real, fy: Real, cx: Real, cy: Real, width: Int, height: Int) -> PyResult<Self> {
+        let inner = Camera::new(
+            fx.get("fx")?,
+            fy.get("fy")?,
+            cx.get("cx")?,
+            cy.get("cy")?,
+            width.at_least(1, "width")?,
+            height.at_least(1, "height")?,
+        )?;
+        check_focal(&inner)?;
+        Ok(PyCamera { inner })
     }
 
     /// Kinect v1 depth camera, 640×480.
@@ -54,29 +80,25 @@ impl PyCamera {
 
     /// A camera from [fx, fy, cx, cy] and an image shape (height, width).
     #[staticmethod]
-    fn from_intrinsics(intrinsics: Vec<f64>, shape: (i128, i128)) -> PyResult<Self> {
-        if intrinsics.len() != 4 {
-            return Err(crate::Error::invalid(
-                "intrinsics",
-                format!("need [fx, fy, cx, cy], got {} values", intrinsics.len()),
-            )
-            .into());
-        }
+    fn from_intrinsics(intrinsics: &Bound<PyAny>, shape: &Bound<PyAny>) -> PyResult<Self> {
+        let k = reals(intrinsics, "intrinsics", Some(4))?;
+        let [h, w] = ints::<2>(shape, "shape", "(height, width)")?;
+        let (h, w) = (h.at_least(1, "shape")?, w.at_least(1, "shape")?);
         Self::new(
-            intrinsics[0],
-            intrinsics[1],
-            intrinsics[2],
-            intrinsics[3],
-            shape.1,
-            shape.0,
+            Real::new(k[0]),
+            Real::new(k[1]),
+            Real::new(k[2]),
+            Real::new(k[3]),
+            Int::new(w as i128),
+            Int::new(h as i128),
         )
     }
 
     /// The same camera for an image resampled by `factor`.
-    fn scaled(&self, factor: f64) -> PyResult<Self> {
-        Ok(PyCamera {
-            inner: self.inner.scaled(factor)?,
-        })
+    fn scaled(&self, factor: Real) -> PyResult<Self> {
+        let inner = self.inner.scaled(factor.get("factor")?)?;
+        check_focal(&inner)?;
+        Ok(PyCamera { inner })
     }
 
     #[getter]
@@ -114,13 +136,14 @@ impl PyCamera {
         [self.inner.fx, self.inner.fy, self.inner.cx, self.inner.cy]
     }
 
-    /// Pixel coordinates (N, 2) [u, v] of camera-frame points (N, 3); NaN behind the camera.
+    /// Pixel coordinates (N, 2) [u, v] of camera-frame points (N, 3); NaN behind the
+    /// camera (or too near its plane to project within the float range).
     fn project<'py>(
         &self,
         py: Python<'py>,
         points: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
-        let p = super::arrays::f64_array(points, "points", Some(2), true)?;
+        let p = f64_array(points, "points", Some(2), true)?;
         if p.shape[1] != 3 {
             return Err(crate::Error::invalid(
                 "points",
@@ -129,18 +152,20 @@ impl PyCamera {
             .into());
         }
         let cam = self.inner;
-        let out: Vec<f64> = native(py, || {
+        let out: Vec<f64> = native_ok(py, || {
             p.data
                 .chunks_exact(3)
                 .flat_map(
                     |q| match cam.project(&nalgebra::Vector3::new(q[0], q[1], q[2])) {
-                        Some((u, v)) => [u, v],
-                        None => [f64::NAN, f64::NAN],
+                        // A point so near the camera plane that it projects beyond the
+                        // float range is in no image either.
+                        Some((u, v)) if u.is_finite() && v.is_finite() => [u, v],
+                        _ => [f64::NAN, f64::NAN],
                     },
                 )
                 .collect()
-        });
-        Ok(super::arrays::to_numpy(py, out, &[p.shape[0], 2]))
+        })?;
+        to_numpy(py, out, &[p.shape[0], 2])
     }
 
     /// Camera-frame points (N, 3) of pixels (N, 2) [u, v] at depths (N,).
@@ -150,8 +175,8 @@ impl PyCamera {
         pixels: &Bound<'py, PyAny>,
         depth: &Bound<'py, PyAny>,
     ) -> PyResult<Bound<'py, numpy::PyArrayDyn<f64>>> {
-        let uv = super::arrays::f64_array(pixels, "pixels", Some(2), true)?;
-        let z = super::arrays::f64_array(depth, "depth", Some(1), true)?;
+        let uv = f64_array(pixels, "pixels", Some(2), true)?;
+        let z = f64_array(depth, "depth", Some(1), true)?;
         if uv.shape[1] != 2 || uv.shape[0] != z.shape[0] {
             return Err(crate::Error::invalid(
                 "pixels",
@@ -163,7 +188,7 @@ impl PyCamera {
             .into());
         }
         let cam = self.inner;
-        let out: Vec<f64> = native(py, || {
+        let out: Vec<f64> = native_ok(py, || {
             uv.data
                 .chunks_exact(2)
                 .zip(&z.data)
@@ -172,8 +197,18 @@ impl PyCamera {
                     [p.x, p.y, p.z]
                 })
                 .collect()
-        });
-        Ok(super::arrays::to_numpy(py, out, &[z.shape[0], 3]))
+        })?;
+        if let Some(k) = out.iter().position(|v| !v.is_finite()) {
+            return Err(invalid(
+                "depth",
+                format!(
+                    "the point of pixel {} at depth {} is beyond the float64 range",
+                    k / 3,
+                    brief(z.data[k / 3])
+                ),
+            ));
+        }
+        to_numpy(py, out, &[z.shape[0], 3])
     }
 
     fn __repr__(&self) -> String {

@@ -1,7 +1,6 @@
 //! Depth → points, normals, neighbour graph and foreground, for Python.
 
-use super::arrays::{bool_array, count, depth_array, to_numpy};
-use super::camera::PyCamera;
+use super::convert::{bool_array, camera as camera_arg, depth_array, invalid, to_numpy, Int, Real};
 use super::native;
 use crate::camera::Camera;
 use crate::cloud::{
@@ -15,18 +14,47 @@ use pyo3::prelude::*;
 type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
 type I32Array<'py> = Bound<'py, PyArrayDyn<i32>>;
 
+/// Largest radius of the normal estimation window, in pixels.
+const MAX_NORMAL_RADIUS: i128 = 32;
+
 fn cloud_of(
     depth: &[f32],
     shape: &[usize],
-    camera: &PyCamera,
+    camera: &Camera,
     mask: Option<&[bool]>,
-) -> PyResult<Cloud> {
+) -> crate::Result<Cloud> {
     let view = DepthView::new(depth, shape[0], shape[1], "depth")?;
-    Ok(Cloud::from_depth(&view, &camera.inner, mask)?)
+    Cloud::from_depth(&view, camera, mask)
 }
 
-fn mask_arg(mask: Option<&Bound<PyAny>>, shape: &[usize]) -> PyResult<Option<Vec<bool>>> {
-    mask.map(|m| bool_array(m, "mask", shape)).transpose()
+/// The depth, camera and mask arguments the cloud functions share, checked.
+struct CloudArgs {
+    depth: Vec<f32>,
+    shape: Vec<usize>,
+    camera: Camera,
+    mask: Option<Vec<bool>>,
+}
+
+impl CloudArgs {
+    fn parse(
+        depth: &Bound<PyAny>,
+        camera: &Bound<PyAny>,
+        mask: Option<&Bound<PyAny>>,
+    ) -> PyResult<Self> {
+        let camera = camera_arg(camera, "camera")?;
+        let d = depth_array(depth, "depth")?;
+        let mask = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+        Ok(CloudArgs {
+            depth: d.data,
+            shape: d.shape,
+            camera,
+            mask,
+        })
+    }
+
+    fn cloud(&self) -> crate::Result<Cloud> {
+        cloud_of(&self.depth, &self.shape, &self.camera, self.mask.as_deref())
+    }
 }
 
 /// Points (N, 3) float32 of the pixels with a reading (and in `mask`), and their pixel
@@ -36,12 +64,11 @@ fn mask_arg(mask: Option<&Bound<PyAny>>, shape: &[usize]) -> PyResult<Option<Vec
 fn depth_to_points<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'py, PyAny>,
     mask: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(F32Array<'py>, I32Array<'py>)> {
-    let d = depth_array(depth, "depth")?;
-    let m = mask_arg(mask, &d.shape)?;
-    let cloud = native(py, || cloud_of(&d.data, &d.shape, camera, m.as_deref()))?;
+    let a = CloudArgs::parse(depth, camera, mask)?;
+    let cloud = native(py, || a.cloud())?;
     let n = cloud.len();
     let pix: Vec<i32> = (0..n)
         .flat_map(|k| {
@@ -50,116 +77,112 @@ fn depth_to_points<'py>(
         })
         .collect();
     let pts: Vec<f32> = cloud.points.into_iter().flatten().collect();
-    Ok((to_numpy(py, pts, &[n, 3]), to_numpy(py, pix, &[n, 2])))
+    Ok((to_numpy(py, pts, &[n, 3])?, to_numpy(py, pix, &[n, 2])?))
 }
 
 /// Unit normals (N, 3), facing the camera, for the points of `depth_to_points`.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, radius=2))]
+#[pyo3(signature = (depth, camera, mask=None, radius=Int::new(2)))]
 fn surface_normals<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'py, PyAny>,
     mask: Option<&Bound<'py, PyAny>>,
-    radius: i128,
+    radius: Int,
 ) -> PyResult<F32Array<'py>> {
-    let radius = count(radius, "radius")?;
-    let d = depth_array(depth, "depth")?;
-    let m = mask_arg(mask, &d.shape)?;
-    if radius == 0 || radius > 32 {
-        return Err(
-            crate::Error::invalid("radius", format!("must be in 1..=32, got {radius}")).into(),
-        );
-    }
-    let normals = native(py, || -> PyResult<Vec<[f32; 3]>> {
-        let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
-        let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
+    let radius = radius.in_range(1, MAX_NORMAL_RADIUS, "radius")? as usize;
+    let a = CloudArgs::parse(depth, camera, mask)?;
+    let normals = native(py, || -> crate::Result<Vec<[f32; 3]>> {
+        let cloud = a.cloud()?;
+        let view = DepthView::new(&a.depth, a.shape[0], a.shape[1], "depth")?;
         let cfg = NormalConfig {
             radius,
             ..Default::default()
         };
-        Ok(normals_from_depth(&view, &camera.inner, &cloud, &cfg))
+        Ok(normals_from_depth(&view, &a.camera, &cloud, &cfg))
     })?;
     let n = normals.len();
-    Ok(to_numpy(
-        py,
-        normals.into_iter().flatten().collect(),
-        &[n, 3],
-    ))
+    to_numpy(py, normals.into_iter().flatten().collect(), &[n, 3])
 }
 
 /// The neighbourhood graph between valid (masked) pixels: edges (E, 2) int32 of point
 /// indices (as in `depth_to_points`), 3-D distance (E,) and depth difference z_j − z_i (E,).
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, connectivity=4))]
+#[pyo3(signature = (depth, camera, mask=None, connectivity=Int::new(4)))]
 fn pixel_graph<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'py, PyAny>,
     mask: Option<&Bound<'py, PyAny>>,
-    connectivity: i128,
+    connectivity: Int,
 ) -> PyResult<(I32Array<'py>, F32Array<'py>, F32Array<'py>)> {
-    let d = depth_array(depth, "depth")?;
-    let m = mask_arg(mask, &d.shape)?;
-    let conn = super::arrays::connectivity(connectivity)?;
-    let g = native(py, || -> PyResult<_> {
-        let cloud = cloud_of(&d.data, &d.shape, camera, m.as_deref())?;
-        Ok(neighbour_graph(&cloud, conn))
+    let conn = super::convert::connectivity(&connectivity)?;
+    let a = CloudArgs::parse(depth, camera, mask)?;
+    let g = native(py, || -> crate::Result<_> {
+        Ok(neighbour_graph(&a.cloud()?, conn))
     })?;
     let e = g.len();
     let edges: Vec<i32> = g.edges.into_iter().flatten().map(|v| v as i32).collect();
     Ok((
-        to_numpy(py, edges, &[e, 2]),
-        to_numpy(py, g.distance, &[e]),
-        to_numpy(py, g.depth_diff, &[e]),
+        to_numpy(py, edges, &[e, 2])?,
+        to_numpy(py, g.distance, &[e])?,
+        to_numpy(py, g.depth_diff, &[e])?,
     ))
 }
 
 /// The person's pixels (H, W) bool. See `depthpose.foreground_mask`.
 #[pyfunction]
-#[pyo3(signature = (depth, background=None, *, camera=None, min_depth=0.3, max_depth=8.0,
-                    bg_tolerance=0.025, bg_tolerance_quadratic=0.003, max_step=0.25,
-                    min_component=40, large_share=0.3))]
+#[pyo3(signature = (depth, background=None, *, camera=None, min_depth=Real::new(0.3),
+                    max_depth=Real::new(8.0), bg_tolerance=Real::new(0.025),
+                    bg_tolerance_quadratic=Real::new(0.003), max_step=Real::new(0.25),
+                    min_component=Int::new(40), large_share=Real::new(0.3)))]
 #[allow(clippy::too_many_arguments)]
 fn foreground_mask<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
     background: Option<&Bound<'py, PyAny>>,
-    camera: Option<&PyCamera>,
-    min_depth: f32,
-    max_depth: f32,
-    bg_tolerance: f32,
-    bg_tolerance_quadratic: f32,
-    max_step: f32,
-    min_component: i128,
-    large_share: f32,
+    camera: Option<&Bound<'py, PyAny>>,
+    min_depth: Real,
+    max_depth: Real,
+    bg_tolerance: Real,
+    bg_tolerance_quadratic: Real,
+    max_step: Real,
+    min_component: Int,
+    large_share: Real,
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
-    let min_component = count(min_component, "min_component")?;
+    let cfg = ForegroundConfig {
+        min_depth: min_depth.get_f32("min_depth")?,
+        max_depth: max_depth.get_f32("max_depth")?,
+        bg_tolerance: bg_tolerance.get_f32("bg_tolerance")?,
+        bg_tolerance_quadratic: bg_tolerance_quadratic.get_f32("bg_tolerance_quadratic")?,
+        max_step: max_step.get_f32("max_step")?,
+        min_component: min_component.count("min_component")?,
+        large_share: large_share.get_f32("large_share")?,
+        ..Default::default()
+    };
     let d = depth_array(depth, "depth")?;
     let bg = background
         .map(|b| depth_array(b, "background"))
         .transpose()?;
-    let cfg = ForegroundConfig {
-        min_depth,
-        max_depth,
-        bg_tolerance,
-        bg_tolerance_quadratic,
-        max_step,
-        min_component,
-        large_share,
-        ..Default::default()
-    };
+    if let Some(b) = &bg {
+        if b.shape != d.shape {
+            return Err(invalid(
+                "background",
+                format!("shape {:?} does not match depth {:?}", b.shape, d.shape),
+            ));
+        }
+    }
     let (h, w) = (d.shape[0], d.shape[1]);
     let camera = match camera {
-        Some(c) => c.inner,
+        Some(c) => camera_arg(c, "camera")?,
         None => Camera::nominal(w, h)?,
     };
-    let mask = native(py, || -> PyResult<Vec<bool>> {
+    let mask = native(py, || -> crate::Result<Vec<bool>> {
         let view = DepthView::new(&d.data, h, w, "depth")?;
         match &bg {
             Some(b) => {
                 let bgv = DepthView::new(&b.data, b.shape[0], b.shape[1], "background")?;
-                Ok(fg_mask(&view, Some(&bgv), &cfg)?)
+                fg_mask(&view, Some(&bgv), &cfg)
             }
             None => {
                 let config = SegmentConfig {
@@ -170,7 +193,7 @@ fn foreground_mask<'py>(
             }
         }
     })?;
-    Ok(to_numpy(py, mask, &d.shape))
+    to_numpy(py, mask, &d.shape)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,15 +1,18 @@
 //! Model fitting for Python: `FitConfig`, `FitResult`, `fit_pose`, `pose_from_joints`.
 
-use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
 use super::body::{pose_arg, poses_arg, PyBodyModel};
-use super::camera::PyCamera;
+use super::convert::{
+    body_model, bool_array, camera as camera_arg, check_fit_points, depth_array, f64_array,
+    fit_config, invalid, object, to_numpy, wrong_type, Flag, Int, Real, Text,
+};
 use super::native;
 use crate::body::{
     BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS, PART_NAMES,
     SHAPE_FACTOR_NAMES,
 };
+use crate::camera::Camera;
 use crate::cloud::Connectivity;
-use crate::error::Error;
+use crate::error::{brief, Error};
 use crate::fit::{self, EmConfig, FitConfig, Loss, PosePrior, MAX_STRIDE};
 use nalgebra::Vector3;
 use numpy::PyArrayDyn;
@@ -88,6 +91,7 @@ impl PyFitConfig {
     }
 
     pub(crate) fn to_rust(&self) -> crate::Result<FitConfig> {
+        self.check_magnitudes()?;
         let loss = match self.loss.as_str() {
             "squared" => Loss::Squared,
             "huber" => Loss::Huber(self.loss_scale),
@@ -95,7 +99,10 @@ impl PyFitConfig {
             other => {
                 return Err(Error::invalid(
                     "loss",
-                    format!("must be 'squared', 'huber' or 'cauchy', got {other:?}"),
+                    format!(
+                        "must be 'squared', 'huber' or 'cauchy', got {}",
+                        crate::error::brief_text(other)
+                    ),
                 ))
             }
         };
@@ -148,93 +155,183 @@ impl PyFitConfig {
         cfg.validate()?;
         Ok(cfg)
     }
+
+    /// Refuses values so large (or lengths so small) that the fit's sums would
+    /// overflow or its loops run without end: lengths within [`MIN_LENGTH`,
+    /// `MAX_LENGTH`] metres, weights and factors up to [`MAX_WEIGHT`], iteration counts
+    /// up to [`MAX_ITERATIONS`]. The finer checks are `EmConfig::validate`'s.
+    fn check_magnitudes(&self) -> crate::Result<()> {
+        for (v, name) in [
+            (self.sigma, "sigma"),
+            (self.loss_scale, "loss_scale"),
+            (self.contrast_sigma, "contrast_sigma"),
+            (self.outlier_distance, "outlier_distance"),
+            (self.outlier_distance_start, "outlier_distance_start"),
+            (self.free_space_truncation, "free_space_truncation"),
+        ] {
+            if v.is_finite() && v > 0.0 && !(MIN_LENGTH..=MAX_LENGTH).contains(&v) {
+                return Err(Error::invalid(
+                    name,
+                    format!(
+                        "must be in [{}, {}] metres, got {}",
+                        brief(MIN_LENGTH),
+                        brief(MAX_LENGTH),
+                        brief(v)
+                    ),
+                ));
+            }
+        }
+        for (v, name, max) in [
+            (self.free_space_margin, "free_space_margin", MAX_LENGTH),
+            (
+                self.settled_joint_motion,
+                "settled_joint_motion",
+                MAX_LENGTH,
+            ),
+            (self.potts, "potts", MAX_WEIGHT),
+            (self.contrast_weight, "contrast_weight", MAX_WEIGHT),
+            (self.free_space_weight, "free_space_weight", MAX_WEIGHT),
+            (self.truncation_factor, "truncation_factor", MAX_WEIGHT),
+        ] {
+            if v.is_finite() && v > max {
+                return Err(Error::invalid(
+                    name,
+                    format!("must be at most {}, got {}", brief(max), brief(v)),
+                ));
+            }
+        }
+        for (v, name) in [
+            (self.anneal_iterations, "anneal_iterations"),
+            (self.max_iterations, "max_iterations"),
+            (self.expansion_cycles, "expansion_cycles"),
+            (self.lm_max_iterations, "lm_max_iterations"),
+            (
+                self.full_resolution_iterations,
+                "full_resolution_iterations",
+            ),
+        ] {
+            if v > MAX_ITERATIONS {
+                return Err(Error::invalid(
+                    name,
+                    format!("must be at most {MAX_ITERATIONS}, got {v}"),
+                ));
+            }
+        }
+        Ok(())
+    }
 }
 
 const DEFAULT_LOSS_SCALE: f64 = 0.03;
+/// Smallest length setting (metres) of `FitConfig`.
+const MIN_LENGTH: f64 = 1e-6;
+/// Largest length setting (metres) of `FitConfig`.
+const MAX_LENGTH: f64 = 1e3;
+/// Largest weight or factor of `FitConfig`.
+const MAX_WEIGHT: f64 = 1e9;
+/// Largest iteration count of `FitConfig`.
+const MAX_ITERATIONS: usize = 100_000;
 
 #[pymethods]
 impl PyFitConfig {
     /// All keyword arguments; defaults are the Rust defaults. Invalid values raise
     /// `InvalidInputError` naming the field.
     #[new]
-    #[pyo3(signature = (*, sigma=None, loss="squared", loss_scale=DEFAULT_LOSS_SCALE, potts=None,
-        contrast_weight=None, contrast_sigma=None, outlier_distance=None,
+    #[pyo3(signature = (*, sigma=None, loss=None, loss_scale=Real::new(DEFAULT_LOSS_SCALE),
+        potts=None, contrast_weight=None, contrast_sigma=None, outlier_distance=None,
         outlier_distance_start=None, anneal_iterations=None, adaptive_anneal=None,
         settled_joint_motion=None, truncation_factor=None,
         max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
         expansion_cycles=None, free_space_weight=None, free_space_margin=None,
-        free_space_truncation=None, lm_max_iterations=None, connectivity=4, stride=1,
-        label_all_pixels=true, full_resolution_iterations=0, recentred_start=true,
-        swapped_limb_starts=false))]
+        free_space_truncation=None, lm_max_iterations=None, connectivity=Int::new(4),
+        stride=Int::new(1), label_all_pixels=Flag::new(true),
+        full_resolution_iterations=Int::new(0), recentred_start=Flag::new(true),
+        swapped_limb_starts=Flag::new(false)))]
     #[allow(clippy::too_many_arguments)]
     fn new(
-        sigma: Option<f64>,
-        loss: &str,
-        loss_scale: f64,
-        potts: Option<f64>,
-        contrast_weight: Option<f64>,
-        contrast_sigma: Option<f64>,
-        outlier_distance: Option<f64>,
-        outlier_distance_start: Option<f64>,
-        anneal_iterations: Option<i128>,
-        adaptive_anneal: Option<bool>,
-        settled_joint_motion: Option<f64>,
-        truncation_factor: Option<f64>,
-        max_iterations: Option<i128>,
-        label_change_tolerance: Option<f64>,
-        energy_tolerance: Option<f64>,
-        expansion_cycles: Option<i128>,
-        free_space_weight: Option<f64>,
-        free_space_margin: Option<f64>,
-        free_space_truncation: Option<f64>,
-        lm_max_iterations: Option<i128>,
-        connectivity: i128,
-        stride: i128,
-        label_all_pixels: bool,
-        full_resolution_iterations: i128,
-        recentred_start: bool,
-        swapped_limb_starts: bool,
+        sigma: Option<Real>,
+        loss: Option<Text>,
+        loss_scale: Real,
+        potts: Option<Real>,
+        contrast_weight: Option<Real>,
+        contrast_sigma: Option<Real>,
+        outlier_distance: Option<Real>,
+        outlier_distance_start: Option<Real>,
+        anneal_iterations: Option<Int>,
+        adaptive_anneal: Option<Flag>,
+        settled_joint_motion: Option<Real>,
+        truncation_factor: Option<Real>,
+        max_iterations: Option<Int>,
+        label_change_tolerance: Option<Real>,
+        energy_tolerance: Option<Real>,
+        expansion_cycles: Option<Int>,
+        free_space_weight: Option<Real>,
+        free_space_margin: Option<Real>,
+        free_space_truncation: Option<Real>,
+        lm_max_iterations: Option<Int>,
+        connectivity: Int,
+        stride: Int,
+        label_all_pixels: Flag,
+        full_resolution_iterations: Int,
+        recentred_start: Flag,
+        swapped_limb_starts: Flag,
     ) -> PyResult<Self> {
         let d = EmConfig::default();
-        let count = |v: Option<i128>, default: usize, name: &str| -> PyResult<usize> {
-            Ok(super::arrays::count_opt(v, name)?.unwrap_or(default))
+        let count = |v: Option<Int>, default: usize, name: &str| -> PyResult<usize> {
+            v.map_or(Ok(default), |v| v.count(name))
+        };
+        let real = |v: Option<Real>, default: f64, name: &str| -> PyResult<f64> {
+            v.map_or(Ok(default), |v| v.get(name))
+        };
+        let flag = |v: Option<Flag>, default: bool, name: &str| -> PyResult<bool> {
+            v.map_or(Ok(default), |v| v.get(name))
         };
         let cfg = PyFitConfig {
-            sigma: sigma.unwrap_or(d.sigma),
-            loss: loss.to_string(),
-            loss_scale,
-            potts: potts.unwrap_or(d.potts),
-            contrast_weight: contrast_weight.unwrap_or(d.contrast_weight),
-            contrast_sigma: contrast_sigma.unwrap_or(d.contrast_sigma),
-            outlier_distance: outlier_distance.unwrap_or(d.outlier_distance),
-            outlier_distance_start: outlier_distance_start.unwrap_or(d.outlier_distance_start),
-            anneal_iterations: count(anneal_iterations, d.anneal_iterations, "anneal_iterations")?,
-            adaptive_anneal: adaptive_anneal.unwrap_or(d.adaptive_anneal),
-            settled_joint_motion: settled_joint_motion.unwrap_or(d.settled_joint_motion),
-            truncation_factor: truncation_factor.unwrap_or(d.truncation_factor),
-            max_iterations: count(max_iterations, d.max_iterations, "max_iterations")?,
-            label_change_tolerance: label_change_tolerance.unwrap_or(d.label_change_tolerance),
-            energy_tolerance: energy_tolerance.unwrap_or(d.energy_tolerance),
-            expansion_cycles: count(expansion_cycles, d.expansion_cycles, "expansion_cycles")?,
-            free_space_weight: free_space_weight.unwrap_or(d.free_space_weight),
-            free_space_margin: free_space_margin.unwrap_or(d.free_space_margin),
-            free_space_truncation: free_space_truncation.unwrap_or(d.free_space_truncation),
-            lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
-            connectivity: super::arrays::connectivity(connectivity)?.neighbours(),
-            stride: usize::try_from(stride)
-                .ok()
-                .filter(|s| (1..=MAX_STRIDE).contains(s))
-                .ok_or_else(|| {
-                    Error::invalid("stride", format!("must be 1..={MAX_STRIDE}, got {stride}"))
-                })?,
-            label_all_pixels,
-            full_resolution_iterations: count(
-                Some(full_resolution_iterations),
-                0,
-                "full_resolution_iterations",
+            sigma: real(sigma, d.sigma, "sigma")?,
+            loss: match &loss {
+                Some(l) => l.get("loss")?.to_string(),
+                None => "squared".to_string(),
+            },
+            loss_scale: loss_scale.get("loss_scale")?,
+            potts: real(potts, d.potts, "potts")?,
+            contrast_weight: real(contrast_weight, d.contrast_weight, "contrast_weight")?,
+            contrast_sigma: real(contrast_sigma, d.contrast_sigma, "contrast_sigma")?,
+            outlier_distance: real(outlier_distance, d.outlier_distance, "outlier_distance")?,
+            outlier_distance_start: real(
+                outlier_distance_start,
+                d.outlier_distance_start,
+                "outlier_distance_start",
             )?,
-            recentred_start,
-            swapped_limb_starts,
+            anneal_iterations: count(anneal_iterations, d.anneal_iterations, "anneal_iterations")?,
+            adaptive_anneal: flag(adaptive_anneal, d.adaptive_anneal, "adaptive_anneal")?,
+            settled_joint_motion: real(
+                settled_joint_motion,
+                d.settled_joint_motion,
+                "settled_joint_motion",
+            )?,
+            truncation_factor: real(truncation_factor, d.truncation_factor, "truncation_factor")?,
+            max_iterations: count(max_iterations, d.max_iterations, "max_iterations")?,
+            label_change_tolerance: real(
+                label_change_tolerance,
+                d.label_change_tolerance,
+                "label_change_tolerance",
+            )?,
+            energy_tolerance: real(energy_tolerance, d.energy_tolerance, "energy_tolerance")?,
+            expansion_cycles: count(expansion_cycles, d.expansion_cycles, "expansion_cycles")?,
+            free_space_weight: real(free_space_weight, d.free_space_weight, "free_space_weight")?,
+            free_space_margin: real(free_space_margin, d.free_space_margin, "free_space_margin")?,
+            free_space_truncation: real(
+                free_space_truncation,
+                d.free_space_truncation,
+                "free_space_truncation",
+            )?,
+            lm_max_iterations: count(lm_max_iterations, d.lm.max_iterations, "lm_max_iterations")?,
+            connectivity: super::convert::connectivity(&connectivity)?.neighbours(),
+            stride: stride.in_range(1, MAX_STRIDE as i128, "stride")? as usize,
+            label_all_pixels: label_all_pixels.get("label_all_pixels")?,
+            full_resolution_iterations: full_resolution_iterations
+                .count("full_resolution_iterations")?,
+            recentred_start: recentred_start.get("recentred_start")?,
+            swapped_limb_starts: swapped_limb_starts.get("swapped_limb_starts")?,
         };
         cfg.to_rust()?;
         Ok(cfg)
@@ -266,12 +363,12 @@ pub struct PyFitResult {
 impl PyFitResult {
     /// The fitted pose (22,).
     #[getter]
-    fn pose<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn pose<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, self.result.pose.to_vec(), &[NUM_PARAMS])
     }
     /// The 15 joints (15, 3), camera frame, ITOP order.
     #[getter]
-    fn joints<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let v = self
             .result
             .joints
@@ -282,7 +379,7 @@ impl PyFitResult {
     }
     /// Part labels (H, W) int16: segment 0..15, −1 = background or outlier.
     #[getter]
-    fn labels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<i16>> {
+    fn labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<i16>>> {
         to_numpy(py, self.result.labels.clone(), &[self.height, self.width])
     }
     #[getter]
@@ -290,7 +387,7 @@ impl PyFitResult {
         self.result.energy
     }
     #[getter]
-    fn energy_trace<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn energy_trace<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let n = self.result.energy_trace.len();
         to_numpy(py, self.result.energy_trace.clone(), &[n])
     }
@@ -356,7 +453,7 @@ impl PyShapeFitResult {
     }
     /// The shape factors (12,) relative to the base model, `factor_names` order.
     #[getter]
-    fn factors<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn factors<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, self.result.factors.to_vec(), &[NUM_SHAPE_FACTORS])
     }
     /// Names of the shape factors.
@@ -374,14 +471,14 @@ impl PyShapeFitResult {
     }
     /// The fitted pose of every frame (F, 22).
     #[getter]
-    fn poses<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn poses<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let n = self.result.poses.len();
         let v = self.result.poses.iter().flatten().copied().collect();
         to_numpy(py, v, &[n, NUM_PARAMS])
     }
     /// The joints of every frame (F, 15, 3) with the fitted model, camera frame.
     #[getter]
-    fn joints<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let n = self.result.joints.len();
         let v = self
             .result
@@ -395,7 +492,7 @@ impl PyShapeFitResult {
     /// Part labels of every frame (F, H, W) int16: segment 0..15, −1 = background or
     /// outlier.
     #[getter]
-    fn labels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<i16>> {
+    fn labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<i16>>> {
         let n = self.result.labels.len();
         let v = self.result.labels.iter().flatten().copied().collect();
         to_numpy(py, v, &[n, self.height, self.width])
@@ -407,7 +504,7 @@ impl PyShapeFitResult {
     }
     /// The energy after every pose/label step and every shape step (non-increasing).
     #[getter]
-    fn energy_trace<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn energy_trace<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let n = self.result.energy_trace.len();
         to_numpy(py, self.result.energy_trace.clone(), &[n])
     }
@@ -432,46 +529,57 @@ impl PyShapeFitResult {
     }
 }
 
-/// The arguments `fit_pose` and `fit_poses` share, checked.
+/// The arguments `fit_pose`, `fit_poses` and `label_all_pixels` share, checked.
 struct FitArgs {
     depth: Vec<f32>,
     height: usize,
     width: usize,
+    camera: Camera,
     mask: Option<Vec<bool>>,
     config: FitConfig,
     prior: Option<PosePrior>,
     model: BodyModel,
 }
 
+/// The keyword arguments `fit_pose`, `fit_poses` and `label_all_pixels` share.
+struct FitOptions<'a, 'py> {
+    model: Option<&'a Bound<'py, PyAny>>,
+    mask: Option<&'a Bound<'py, PyAny>>,
+    config: Option<&'a Bound<'py, PyAny>>,
+    prior: Option<&'a Bound<'py, PyAny>>,
+    prior_weight: Real,
+}
+
 impl FitArgs {
     fn parse(
         depth: &Bound<'_, PyAny>,
-        camera: &PyCamera,
-        model: Option<&PyBodyModel>,
-        mask: Option<&Bound<'_, PyAny>>,
-        config: Option<&PyFitConfig>,
-        prior: Option<&Bound<'_, PyAny>>,
-        prior_weight: f64,
+        camera: &Bound<'_, PyAny>,
+        options: &FitOptions<'_, '_>,
     ) -> PyResult<Self> {
+        let camera = camera_arg(camera, "camera")?;
+        let model = body_model(options.model, "model")?;
+        let config = fit_config(options.config, "config")?;
+        let prior_weight = options.prior_weight.get("prior_weight")?;
         let d = depth_array(depth, "depth")?;
         let (height, width) = (d.shape[0], d.shape[1]);
-        camera.inner.check_image("depth", height, width)?;
-        let mask = mask
+        camera.check_image("depth", height, width)?;
+        let mask = options
+            .mask
             .map(|m| bool_array(m, "mask", &[height, width]))
             .transpose()?;
-        let config = match config {
-            Some(c) => c.to_rust()?,
-            None => FitConfig::default(),
-        };
-        let prior = match prior {
+        check_fit_points(&d.data, mask.as_deref(), 0, "depth")?;
+        let prior = match options.prior {
             Some(p) => {
                 let prior = pose_arg(p, "prior")?;
-                if !(prior_weight.is_finite() && prior_weight >= 0.0) {
-                    return Err(Error::invalid(
+                if !(prior_weight.is_finite() && (0.0..=MAX_PRIOR_WEIGHT).contains(&prior_weight)) {
+                    return Err(invalid(
                         "prior_weight",
-                        format!("must be finite and >= 0, got {prior_weight}"),
-                    )
-                    .into());
+                        format!(
+                            "must be finite and in [0, {}], got {}",
+                            brief(MAX_PRIOR_WEIGHT),
+                            brief(prior_weight)
+                        ),
+                    ));
                 }
                 Some(PosePrior::uniform(prior, prior_weight, prior_weight))
             }
@@ -481,10 +589,11 @@ impl FitArgs {
             depth: d.data,
             height,
             width,
+            camera,
             mask,
             config,
             prior,
-            model: model.map_or_else(BodyModel::default, |m| m.inner.clone()),
+            model,
         })
     }
 
@@ -495,37 +604,71 @@ impl FitArgs {
             width: self.width,
         }
     }
+
+    /// Refuses an earlier result of an image of another size.
+    fn check_same_image(&self, result: &PyFitResult, name: &str) -> PyResult<()> {
+        if (result.height, result.width) != (self.height, self.width) {
+            return Err(invalid(
+                name,
+                format!(
+                    "is a result on a {}x{} image, but depth is {}x{} (a result can only \
+                     resume or label the image it was fitted to)",
+                    result.height, result.width, self.height, self.width
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Largest `prior_weight` (a weight per squared radian or metre).
+const MAX_PRIOR_WEIGHT: f64 = 1e12;
+
+fn fit_result<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyRef<'py, PyFitResult>> {
+    object::<PyFitResult>(obj, name, "a depthpose.FitResult")
 }
 
 /// Fits the body to the depth image from `init_pose` (hard EM: CRF labels + LM);
 /// with `resume` (an earlier result on this image) the EM continues from its labels
 /// and iteration count.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0, resume=None))]
+#[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None,
+                    prior_weight=Real::new(100.0), resume=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit_pose(
     py: Python<'_>,
     depth: &Bound<'_, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'_, PyAny>,
     init_pose: &Bound<'_, PyAny>,
-    model: Option<&PyBodyModel>,
+    model: Option<&Bound<'_, PyAny>>,
     mask: Option<&Bound<'_, PyAny>>,
-    config: Option<&PyFitConfig>,
+    config: Option<&Bound<'_, PyAny>>,
     prior: Option<&Bound<'_, PyAny>>,
-    prior_weight: f64,
-    resume: Option<PyRef<'_, PyFitResult>>,
+    prior_weight: Real,
+    resume: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<PyFitResult> {
-    let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
+    let options = FitOptions {
+        model,
+        mask,
+        config,
+        prior,
+        prior_weight,
+    };
+    let args = FitArgs::parse(depth, camera, &options)?;
     let init = pose_arg(init_pose, "init_pose")?;
-    let cam = camera.inner;
+    let resume = resume.map(|r| fit_result(r, "resume")).transpose()?;
+    if let Some(r) = &resume {
+        args.check_same_image(r, "resume")?;
+    }
     let resume = resume.as_ref().map(|r| &r.result);
     let result = native(py, || {
-        fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.fit_from(
-            &args.model,
-            &init,
-            resume,
-            args.prior.as_ref(),
-        )
+        fit::FitProblem::new(
+            &args.depth,
+            &args.camera,
+            args.mask.as_deref(),
+            &args.config,
+        )?
+        .fit_from(&args.model, &init, resume, args.prior.as_ref())
     })?;
     Ok(args.result(result))
 }
@@ -534,30 +677,69 @@ fn fit_pose(
 /// (with `resume`, K earlier results, each continued); a list of K results, each
 /// identical to its own `fit_pose` call.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, init_poses, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0, resume=None))]
+#[pyo3(signature = (depth, camera, init_poses, *, model=None, mask=None, config=None, prior=None,
+                    prior_weight=Real::new(100.0), resume=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit_poses(
     py: Python<'_>,
     depth: &Bound<'_, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'_, PyAny>,
     init_poses: &Bound<'_, PyAny>,
-    model: Option<&PyBodyModel>,
+    model: Option<&Bound<'_, PyAny>>,
     mask: Option<&Bound<'_, PyAny>>,
-    config: Option<&PyFitConfig>,
+    config: Option<&Bound<'_, PyAny>>,
     prior: Option<&Bound<'_, PyAny>>,
-    prior_weight: f64,
-    resume: Option<Vec<PyRef<'_, PyFitResult>>>,
+    prior_weight: Real,
+    resume: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Vec<PyFitResult>> {
-    let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
+    let options = FitOptions {
+        model,
+        mask,
+        config,
+        prior,
+        prior_weight,
+    };
+    let args = FitArgs::parse(depth, camera, &options)?;
     let inits = poses_arg(init_poses, "init_poses")?;
-    let cam = camera.inner;
+    if inits.len() > MAX_START_POSES {
+        return Err(super::convert::too_large(
+            "init_poses",
+            format!("{} start poses; at most {MAX_START_POSES}", inits.len()),
+        ));
+    }
+    let resume: Option<Vec<PyRef<PyFitResult>>> = match resume {
+        None => None,
+        Some(r) => {
+            let Ok(items) = r.try_iter() else {
+                return Err(wrong_type(
+                    "resume",
+                    "a list of depthpose.FitResult",
+                    &r.get_type()
+                        .name()
+                        .map(|n| n.to_string())
+                        .unwrap_or_default(),
+                ));
+            };
+            let mut out = Vec::new();
+            for (k, item) in items.enumerate() {
+                if k >= MAX_START_POSES {
+                    return Err(invalid("resume", "has more results than start poses"));
+                }
+                let item = item?;
+                let res = fit_result(&item, &format!("resume[{k}]"))?;
+                args.check_same_image(&res, &format!("resume[{k}]"))?;
+                out.push(res);
+            }
+            Some(out)
+        }
+    };
     let resume: Option<Vec<&fit::FitResult>> = resume
         .as_ref()
         .map(|r| r.iter().map(|x| &x.result).collect());
     let results = native(py, || {
         fit::fit_poses(
             &args.depth,
-            &cam,
+            &args.camera,
             &inits,
             resume.as_deref(),
             &args.model,
@@ -569,31 +751,45 @@ fn fit_poses(
     Ok(results.into_iter().map(|r| args.result(r)).collect())
 }
 
+/// Most start poses of one `fit_poses` call.
+const MAX_START_POSES: usize = 4096;
+
 /// `result` (a fit of this image with `config`, made with `label_all_pixels` off)
 /// labelled at every pixel, as the fit with `label_all_pixels` on would have been.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, result, *, model=None, mask=None, config=None, prior=None, prior_weight=100.0))]
+#[pyo3(signature = (depth, camera, result, *, model=None, mask=None, config=None, prior=None,
+                    prior_weight=Real::new(100.0)))]
 #[allow(clippy::too_many_arguments)]
 fn label_all_pixels(
     py: Python<'_>,
     depth: &Bound<'_, PyAny>,
-    camera: &PyCamera,
-    result: PyRef<'_, PyFitResult>,
-    model: Option<&PyBodyModel>,
+    camera: &Bound<'_, PyAny>,
+    result: &Bound<'_, PyAny>,
+    model: Option<&Bound<'_, PyAny>>,
     mask: Option<&Bound<'_, PyAny>>,
-    config: Option<&PyFitConfig>,
+    config: Option<&Bound<'_, PyAny>>,
     prior: Option<&Bound<'_, PyAny>>,
-    prior_weight: f64,
+    prior_weight: Real,
 ) -> PyResult<PyFitResult> {
-    let args = FitArgs::parse(depth, camera, model, mask, config, prior, prior_weight)?;
-    let cam = camera.inner;
+    let options = FitOptions {
+        model,
+        mask,
+        config,
+        prior,
+        prior_weight,
+    };
+    let args = FitArgs::parse(depth, camera, &options)?;
+    let result = fit_result(result, "result")?;
+    args.check_same_image(&result, "result")?;
     let fit = &result.result;
     let labelled = native(py, || {
-        fit::FitProblem::new(&args.depth, &cam, args.mask.as_deref(), &args.config)?.label_all(
-            &args.model,
-            fit,
-            args.prior.as_ref(),
-        )
+        fit::FitProblem::new(
+            &args.depth,
+            &args.camera,
+            args.mask.as_deref(),
+            &args.config,
+        )?
+        .label_all(&args.model, fit, args.prior.as_ref())
     })?;
     Ok(args.result(labelled))
 }
@@ -604,27 +800,43 @@ fn label_all_pixels(
 fn pose_from_joints<'py>(
     py: Python<'py>,
     joints: &Bound<'py, PyAny>,
-    model: Option<&PyBodyModel>,
+    model: Option<&Bound<'py, PyAny>>,
     init: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<F64Array<'py>> {
+    let model = body_model(model, "model")?;
     let a = f64_array(joints, "joints", Some(2), false)?;
     if a.shape != [NUM_JOINTS, 3] {
-        return Err(Error::invalid(
+        return Err(invalid(
             "joints",
             format!("expected shape ({NUM_JOINTS}, 3), got {:?}", a.shape),
-        )
-        .into());
+        ));
     }
     if let Some(i) = a.data.iter().position(|v| v.is_infinite()) {
-        return Err(Error::invalid("joints", format!("infinite value at flat index {i}")).into());
+        return Err(invalid(
+            "joints",
+            format!("infinite value at flat index {i}"),
+        ));
+    }
+    if let Some(i) = a.data.iter().position(|v| v.abs() > MAX_COORDINATE) {
+        return Err(invalid(
+            "joints",
+            format!(
+                "{} m at flat index {i} is beyond {} m from the camera",
+                brief(a.data[i]),
+                brief(MAX_COORDINATE)
+            ),
+        ));
     }
     let init = init.map(|p| pose_arg(p, "init")).transpose()?;
     let j: [Vector3<f64>; NUM_JOINTS] =
         std::array::from_fn(|k| Vector3::new(a.data[3 * k], a.data[3 * k + 1], a.data[3 * k + 2]));
-    let model = model.map_or_else(BodyModel::default, |m| m.inner.clone());
     let pose = native(py, || fit::pose_from_joints(&model, &j, init.as_ref()))?;
-    Ok(to_numpy(py, pose.to_vec(), &[NUM_PARAMS]))
+    to_numpy(py, pose.to_vec(), &[NUM_PARAMS])
 }
+
+/// Largest joint coordinate `pose_from_joints` takes (metres): beyond it the inverse
+/// kinematics has nothing meaningful to fit.
+const MAX_COORDINATE: f64 = 1e6;
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyFitConfig>()?;

@@ -1,13 +1,14 @@
 //! Max-flow graphs and CRF move-making solvers for Python (`depthpose.graphcut`).
 
-use super::arrays::{count_at_least, f64_array, i64_array, to_numpy};
-use super::native;
+use super::convert::{
+    check_result_bytes, f64_array, i64_array, invalid, to_numpy, too_large, wrong_type, Int,
+};
+use super::{native, native_ok};
 use crate::graphcut::{
     alpha_beta_swap as swap_core, alpha_expansion as expansion_core, energy as energy_core,
     grid_edges as grid_edges_core, maxflow::MAX_NODES, Cost, CrfProblem, Graph, Labelling,
     MoveConfig,
 };
-use crate::Error;
 use numpy::{PyArrayDescrMethods, PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyAny;
@@ -30,14 +31,25 @@ fn is_integer_dtype(dtype: &Bound<PyAny>) -> PyResult<bool> {
         .import("numpy")?
         .getattr("dtype")?
         .call1((dtype,))
-        .map_err(|_| Error::invalid("dtype", "not a dtype; use float or int"))?;
+        .map_err(|_| wrong_type("dtype", "a dtype (float or int)", &type_name(dtype)))?;
     let kind: String = dt.getattr("kind")?.extract()?;
     match kind.as_str() {
         "f" => Ok(false),
         "i" | "u" => Ok(true),
-        _ => Err(Error::invalid("dtype", format!("must be float or int, got {dt}")).into()),
+        _ => Err(invalid("dtype", format!("must be float or int, got {dt}"))),
     }
 }
+
+fn type_name(obj: &Bound<PyAny>) -> String {
+    obj.get_type()
+        .name()
+        .map(|n| n.to_string())
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// Most labels of a CRF (its pairwise table has L × L entries, and expansion checks
+/// the triangle inequality on every triple).
+pub const MAX_LABELS: usize = 1024;
 
 /// Is `obj` a numpy array with an integer dtype?
 fn array_is_integer(obj: &Bound<PyAny>) -> bool {
@@ -60,14 +72,13 @@ fn node_indices(obj: &Bound<PyAny>, name: &str, n: usize) -> PyResult<Vec<u32>> 
 
 fn indices_in_range(data: &[i64], name: &str, n: usize) -> PyResult<Vec<u32>> {
     if let Some(k) = data.iter().position(|&v| v < 0 || v as u64 >= n as u64) {
-        return Err(Error::invalid(
+        return Err(invalid(
             name,
             format!(
                 "node index {} at position {k} out of range for {n} nodes",
                 data[k]
             ),
-        )
-        .into());
+        ));
     }
     Ok(data.iter().map(|&v| v as u32).collect())
 }
@@ -76,14 +87,13 @@ fn indices_in_range(data: &[i64], name: &str, n: usize) -> PyResult<Vec<u32>> {
 fn is_empty_array(obj: &Bound<PyAny>, name: &str, ndim: Option<usize>) -> PyResult<bool> {
     let arr = obj
         .cast::<PyUntypedArray>()
-        .map_err(|_| Error::invalid(name, "expected a numpy array"))?;
+        .map_err(|_| wrong_type(name, "a numpy array", &type_name(obj)))?;
     if let Some(d) = ndim {
         if arr.ndim() != d {
-            return Err(Error::invalid(
+            return Err(invalid(
                 name,
                 format!("expected a {d}-D array, got shape {:?}", arr.shape()),
-            )
-            .into());
+            ));
         }
     }
     Ok(arr.len() == 0)
@@ -100,9 +110,17 @@ fn i64_caps(obj: &Bound<PyAny>, name: &str) -> PyResult<Vec<i64>> {
     if is_empty_array(obj, name, Some(1))? {
         return Ok(Vec::new());
     }
-    Ok(i64_array(obj, name, Some(1))
-        .map_err(|e| Error::invalid(name, format!("an int graph needs integer capacities ({e})")))?
-        .data)
+    if !array_is_integer(obj) {
+        let dtype = obj
+            .cast::<PyUntypedArray>()
+            .map(|a| a.dtype().to_string())
+            .unwrap_or_default();
+        return Err(invalid(
+            name,
+            format!("an int graph needs integer capacities, got dtype {dtype}"),
+        ));
+    }
+    Ok(i64_array(obj, name, Some(1))?.data)
 }
 
 /// A directed graph with source and sink for max-flow / min-cut (Boykov–Kolmogorov).
@@ -149,24 +167,19 @@ impl PyGraph {
 #[pymethods]
 impl PyGraph {
     #[new]
-    #[pyo3(signature = (n_nodes, dtype=None, edge_hint=0))]
-    fn new(n_nodes: i128, dtype: Option<&Bound<PyAny>>, edge_hint: i128) -> PyResult<Self> {
-        if n_nodes <= 0 || n_nodes > MAX_NODES as i128 {
-            return Err(Error::invalid(
-                "n_nodes",
-                format!("must be in 1..={MAX_NODES}, got {n_nodes}"),
-            )
-            .into());
-        }
+    #[pyo3(signature = (n_nodes, dtype=None, edge_hint=Int::new(0)))]
+    fn new(n_nodes: Int, dtype: Option<&Bound<PyAny>>, edge_hint: Int) -> PyResult<Self> {
+        let n_nodes = n_nodes.in_range(1, MAX_NODES as i128, "n_nodes")?;
         let max_hint = i128::from(u32::MAX) / 2;
-        if !(0..=max_hint).contains(&edge_hint) {
-            return Err(Error::invalid(
-                "edge_hint",
-                format!("must be in 0..={max_hint}, got {edge_hint}"),
-            )
-            .into());
-        }
-        let hint = edge_hint as usize;
+        let hint = edge_hint.in_range(0, max_hint, "edge_hint")? as usize;
+        // About 32 bytes a node and 48 an edge (its two arcs and its pending record).
+        check_result_bytes(
+            (n_nodes as usize)
+                .checked_mul(32)
+                .and_then(|b| b.checked_add(hint.checked_mul(48)?)),
+            "n_nodes/edge_hint",
+            "the graph",
+        )?;
         let integer = match dtype {
             Some(d) => is_integer_dtype(d)?,
             None => false,
@@ -261,10 +274,10 @@ impl PyGraph {
     /// Builds the arc arrays from the edges added so far (otherwise the next `maxflow()`
     /// does it), so that `maxflow()` times the solve alone. Edges added later are merged
     /// by another build.
-    fn finalize(&mut self, py: Python<'_>) {
+    fn finalize(&mut self, py: Python<'_>) -> PyResult<()> {
         match &mut self.inner {
-            Inner::F(g) => native(py, || g.finalize()),
-            Inner::I(g) => native(py, || g.finalize()),
+            Inner::F(g) => native_ok(py, || g.finalize()),
+            Inner::I(g) => native_ok(py, || g.finalize()),
         }
     }
 
@@ -272,27 +285,28 @@ impl PyGraph {
     /// A fresh solve of a large grid uses up to `threads` threads (None: all of the
     /// pool's); the cut does not depend on it.
     #[pyo3(signature = (threads=None))]
-    fn maxflow(&mut self, py: Python<'_>, threads: Option<i128>) -> PyResult<Py<PyAny>> {
+    fn maxflow(&mut self, py: Python<'_>, threads: Option<Int>) -> PyResult<Py<PyAny>> {
         let threads = match threads {
             None => 0,
             // More threads than the pool has gain nothing; a huge count is just all.
-            Some(t) if t >= 1 => usize::try_from(t).unwrap_or(usize::MAX),
-            Some(t) => {
-                return Err(
-                    Error::invalid("threads", format!("must be at least 1, got {t}")).into(),
-                )
-            }
+            Some(t) => t.at_least(1, "threads").or_else(|e| {
+                if t.get("threads").is_ok_and(|v| v > 0) {
+                    Ok(usize::MAX)
+                } else {
+                    Err(e)
+                }
+            })?,
         };
         match &mut self.inner {
             Inner::F(g) => g.set_max_threads(threads),
             Inner::I(g) => g.set_max_threads(threads),
         }
         Ok(match &mut self.inner {
-            Inner::F(g) => native(py, || g.maxflow())
+            Inner::F(g) => native_ok(py, || g.maxflow())?
                 .into_pyobject(py)?
                 .into_any()
                 .unbind(),
-            Inner::I(g) => native(py, || g.maxflow())
+            Inner::I(g) => native_ok(py, || g.maxflow())?
                 .into_pyobject(py)?
                 .into_any()
                 .unbind(),
@@ -300,7 +314,7 @@ impl PyGraph {
     }
 
     /// The side of each node in the minimum cut: True = sink side.
-    fn segments<'py>(&self, py: Python<'py>) -> BoolArray<'py> {
+    fn segments<'py>(&self, py: Python<'py>) -> PyResult<BoolArray<'py>> {
         let (seg, n) = match &self.inner {
             Inner::F(g) => (g.segments(), g.n_nodes()),
             Inner::I(g) => (g.segments(), g.n_nodes()),
@@ -311,20 +325,20 @@ impl PyGraph {
 
 /// Edges (E, 2) int64 of an h×w pixel grid with row-major node ids, 4- or 8-connected.
 #[pyfunction]
-#[pyo3(signature = (h, w, connectivity=4))]
-fn grid_edges<'py>(
-    py: Python<'py>,
-    h: i128,
-    w: i128,
-    connectivity: i128,
-) -> PyResult<I64Array<'py>> {
-    let h = count_at_least(h, 1, "h")?;
-    let w = count_at_least(w, 1, "w")?;
-    let connectivity = super::arrays::connectivity(connectivity)?.neighbours() as u8;
+#[pyo3(signature = (h, w, connectivity=Int::new(4)))]
+fn grid_edges<'py>(py: Python<'py>, h: Int, w: Int, connectivity: Int) -> PyResult<I64Array<'py>> {
+    let h = h.at_least(1, "h")?;
+    let w = w.at_least(1, "w")?;
+    let connectivity = super::convert::connectivity(&connectivity)?.neighbours() as u8;
+    // Up to connectivity / 2 edges a node, each 8 bytes here and 16 in the result.
+    let bytes = h
+        .checked_mul(w)
+        .and_then(|n| n.checked_mul(usize::from(connectivity) / 2 * 24));
+    check_result_bytes(bytes, "h/w", "the grid's edges")?;
     let e = native(py, || grid_edges_core(h, w, connectivity))?;
     let m = e.len();
     let flat: Vec<i64> = e.into_iter().flatten().map(i64::from).collect();
-    Ok(to_numpy(py, flat, &[m, 2]))
+    to_numpy(py, flat, &[m, 2])
 }
 
 /// Parsed CRF arguments of one cost type.
@@ -354,9 +368,10 @@ fn edges_arg(edges: &Bound<PyAny>, n: usize) -> PyResult<Vec<[u32; 2]>> {
     }
     let e = i64_array(edges, "edges", Some(2))?;
     if e.shape[1] != 2 {
-        return Err(
-            Error::invalid("edges", format!("expected shape (E, 2), got {:?}", e.shape)).into(),
-        );
+        return Err(invalid(
+            "edges",
+            format!("expected shape (E, 2), got {:?}", e.shape),
+        ));
     }
     let idx = indices_in_range(&e.data, "edges", n)?;
     Ok(idx.chunks_exact(2).map(|p| [p[0], p[1]]).collect())
@@ -365,18 +380,24 @@ fn edges_arg(edges: &Bound<PyAny>, n: usize) -> PyResult<Vec<[u32; 2]>> {
 fn unary_shape(unary: &Bound<PyAny>) -> PyResult<(usize, usize)> {
     let arr = unary
         .cast::<PyUntypedArray>()
-        .map_err(|_| Error::invalid("unary", "expected a numpy array"))?;
+        .map_err(|_| wrong_type("unary", "a numpy array", &type_name(unary)))?;
     if arr.ndim() != 2 || arr.len() == 0 {
-        return Err(Error::invalid(
+        return Err(invalid(
             "unary",
             format!(
                 "expected a non-empty (N, L) array, got shape {:?}",
                 arr.shape()
             ),
-        )
-        .into());
+        ));
     }
-    Ok((arr.shape()[0], arr.shape()[1]))
+    let l = arr.shape()[1];
+    if l > MAX_LABELS {
+        return Err(too_large(
+            "unary",
+            format!("{l} labels exceed the limit MAX_LABELS = {MAX_LABELS}"),
+        ));
+    }
+    Ok((arr.shape()[0], l))
 }
 
 fn f64_crf(
@@ -435,19 +456,20 @@ fn i64_crf(
 fn pairwise_arg<C>(
     p: &Bound<PyAny>,
     l: usize,
-    conv: impl Fn(&Bound<PyAny>) -> PyResult<super::arrays::Arr<C>>,
+    conv: impl Fn(&Bound<PyAny>) -> PyResult<super::convert::Arr<C>>,
 ) -> PyResult<Vec<C>> {
-    let a = conv(p)?;
-    if a.shape != [l, l] {
-        return Err(Error::invalid(
-            "pairwise",
-            format!(
-                "expected shape ({l}, {l}) for {l} labels, got {:?}",
-                a.shape
-            ),
-        )
-        .into());
+    if let Ok(arr) = p.cast::<PyUntypedArray>() {
+        if arr.shape() != [l, l] {
+            return Err(invalid(
+                "pairwise",
+                format!(
+                    "expected shape ({l}, {l}) for {l} labels, got {:?}",
+                    arr.shape()
+                ),
+            ));
+        }
     }
+    let a = conv(p)?;
     Ok(a.data)
 }
 
@@ -459,11 +481,10 @@ fn init_arg(init: Option<&Bound<PyAny>>) -> PyResult<Option<Vec<i32>>> {
         .iter()
         .position(|&v| v < i64::from(i32::MIN) || v > i64::from(i32::MAX))
     {
-        return Err(Error::invalid(
+        return Err(invalid(
             "init",
             format!("label {} at node {k} out of range", a.data[k]),
-        )
-        .into());
+        ));
     }
     Ok(Some(a.data.iter().map(|&v| v as i32).collect()))
 }
@@ -484,28 +505,39 @@ fn integer_mode(
 
 type Solver<C> = fn(&CrfProblem<C>, Option<&[i32]>, &MoveConfig) -> crate::Result<Labelling<C>>;
 
-#[allow(clippy::too_many_arguments)]
+/// The arguments `alpha_expansion` and `alpha_beta_swap` share.
+struct CrfCall<'a, 'py> {
+    unary: &'a Bound<'py, PyAny>,
+    edges: &'a Bound<'py, PyAny>,
+    weights: &'a Bound<'py, PyAny>,
+    pairwise: Option<&'a Bound<'py, PyAny>>,
+    init: Option<&'a Bound<'py, PyAny>>,
+    max_cycles: Int,
+}
+
 fn solve<'py>(
     py: Python<'py>,
-    unary: &Bound<'py, PyAny>,
-    edges: &Bound<'py, PyAny>,
-    weights: &Bound<'py, PyAny>,
-    pairwise: Option<&Bound<'py, PyAny>>,
-    init: Option<&Bound<'py, PyAny>>,
-    max_cycles: i128,
+    call: CrfCall<'_, 'py>,
     f: Solver<f64>,
     i: Solver<i64>,
 ) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
-    if max_cycles < 0 {
-        return Err(Error::invalid(
-            "max_cycles",
-            format!("must be non-negative, got {max_cycles}"),
-        )
-        .into());
-    }
+    let CrfCall {
+        unary,
+        edges,
+        weights,
+        pairwise,
+        init,
+        max_cycles,
+    } = call;
     let cfg = MoveConfig {
-        // Beyond usize the cycles are unbounded anyway (expansion stops at a fixed point).
-        max_cycles: usize::try_from(max_cycles).unwrap_or(usize::MAX),
+        // Each cycle but the last lowers the energy, so the cycles end at a fixed point
+        // whatever the bound; a bound beyond usize is no bound.
+        max_cycles: max_cycles.count("max_cycles").or_else(|e| {
+            match max_cycles.get("max_cycles") {
+                Ok(v) if v > 0 => Ok(usize::MAX),
+                _ => Err(e),
+            }
+        })?,
     };
     let init = init_arg(init)?;
     if integer_mode(unary, weights, pairwise) {
@@ -513,7 +545,7 @@ fn solve<'py>(
         let r = native(py, || i(&args.problem(), init.as_deref(), &cfg))?;
         let n = r.labels.len();
         Ok((
-            to_numpy(py, r.labels, &[n]),
+            to_numpy(py, r.labels, &[n])?,
             r.energy.into_pyobject(py)?.into_any().unbind(),
         ))
     } else {
@@ -521,7 +553,7 @@ fn solve<'py>(
         let r = native(py, || f(&args.problem(), init.as_deref(), &cfg))?;
         let n = r.labels.len();
         Ok((
-            to_numpy(py, r.labels, &[n]),
+            to_numpy(py, r.labels, &[n])?,
             r.energy.into_pyobject(py)?.into_any().unbind(),
         ))
     }
@@ -530,7 +562,7 @@ fn solve<'py>(
 /// Alpha-expansion on E(l) = Σ unary[i, l_i] + Σ_e weights[e]·pairwise[l_i, l_j].
 /// Returns (labels int32 (N,), energy); integer inputs give an exact int energy.
 #[pyfunction]
-#[pyo3(signature = (unary, edges, weights, *, pairwise=None, init=None, max_cycles=20))]
+#[pyo3(signature = (unary, edges, weights, *, pairwise=None, init=None, max_cycles=Int::new(20)))]
 fn alpha_expansion<'py>(
     py: Python<'py>,
     unary: &Bound<'py, PyAny>,
@@ -538,24 +570,22 @@ fn alpha_expansion<'py>(
     weights: &Bound<'py, PyAny>,
     pairwise: Option<&Bound<'py, PyAny>>,
     init: Option<&Bound<'py, PyAny>>,
-    max_cycles: i128,
+    max_cycles: Int,
 ) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
-    solve(
-        py,
+    let call = CrfCall {
         unary,
         edges,
         weights,
         pairwise,
         init,
         max_cycles,
-        expansion_core::<f64>,
-        expansion_core::<i64>,
-    )
+    };
+    solve(py, call, expansion_core::<f64>, expansion_core::<i64>)
 }
 
 /// Alpha-beta swap (semi-metric pairwise), same arguments as `alpha_expansion`.
 #[pyfunction]
-#[pyo3(signature = (unary, edges, weights, *, pairwise=None, init=None, max_cycles=20))]
+#[pyo3(signature = (unary, edges, weights, *, pairwise=None, init=None, max_cycles=Int::new(20)))]
 fn alpha_beta_swap<'py>(
     py: Python<'py>,
     unary: &Bound<'py, PyAny>,
@@ -563,19 +593,17 @@ fn alpha_beta_swap<'py>(
     weights: &Bound<'py, PyAny>,
     pairwise: Option<&Bound<'py, PyAny>>,
     init: Option<&Bound<'py, PyAny>>,
-    max_cycles: i128,
+    max_cycles: Int,
 ) -> PyResult<(I32Array<'py>, Py<PyAny>)> {
-    solve(
-        py,
+    let call = CrfCall {
         unary,
         edges,
         weights,
         pairwise,
         init,
         max_cycles,
-        swap_core::<f64>,
-        swap_core::<i64>,
-    )
+    };
+    solve(py, call, swap_core::<f64>, swap_core::<i64>)
 }
 
 /// The CRF energy of `labels` (int for integer inputs; inf if a label is forbidden).
@@ -595,11 +623,10 @@ fn crf_energy(
         .iter()
         .position(|&v| v < 0 || v > i64::from(i32::MAX))
     {
-        return Err(Error::invalid(
+        return Err(invalid(
             "labels",
             format!("label {} at node {k} out of range", lab.data[k]),
-        )
-        .into());
+        ));
     }
     let lab: Vec<i32> = lab.data.iter().map(|&v| v as i32).collect();
     if integer_mode(unary, weights, pairwise) {
@@ -619,5 +646,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(alpha_expansion, m)?)?;
     m.add_function(wrap_pyfunction!(alpha_beta_swap, m)?)?;
     m.add_function(wrap_pyfunction!(crf_energy, m)?)?;
+    m.add("MAX_LABELS", MAX_LABELS)?;
     Ok(())
 }

@@ -2,9 +2,11 @@
 //! and tracker that `depthpose.PoseEstimator` / `depthpose.PoseTracker` wrap. Each
 //! `estimate` and `update` is one native call with the GIL released.
 
-use super::arrays::{bool_array, depth_array, f64_array, to_numpy};
 use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::camera::PyCamera;
+use super::convert::{
+    bool_array, camera as camera_arg, depth_array, f64_array, object, to_numpy, Flag, Int, Real,
+};
 use super::fit::{PyFitConfig, PyShapeFitResult};
 use super::native;
 use super::segment::{PyCluster, PyPlane};
@@ -17,7 +19,7 @@ use crate::pipeline::{
 };
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyFloat, PyInt};
+use pyo3::types::PyDict;
 
 type F64Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 
@@ -30,16 +32,7 @@ pub struct PyPipelineConfig {
 }
 
 fn int_field(value: &Bound<PyAny>, name: &str) -> PyResult<usize> {
-    if !value.is_instance_of::<PyInt>() || value.is_instance_of::<pyo3::types::PyBool>() {
-        return Err(
-            Error::invalid(name, format!("expected an integer, got {}", short(value))).into(),
-        );
-    }
-    let v: i128 = value
-        .extract()
-        .map_err(|_| Error::invalid(name, format!("expected an integer, got {}", short(value))))?;
-    usize::try_from(v)
-        .map_err(|_| Error::invalid(name, format!("expected an integer >= 0, got {v}")).into())
+    value.extract::<Int>()?.count(name)
 }
 
 fn bool_field(value: &Bound<PyAny>, name: &str) -> PyResult<bool> {
@@ -54,19 +47,7 @@ fn bool_field(value: &Bound<PyAny>, name: &str) -> PyResult<bool> {
 }
 
 fn real_field(value: &Bound<PyAny>, name: &str) -> PyResult<f64> {
-    let number = value.is_instance_of::<PyFloat>()
-        || (value.is_instance_of::<PyInt>() && !value.is_instance_of::<pyo3::types::PyBool>())
-        || value.hasattr("__float__")?
-            && !value.is_instance_of::<pyo3::types::PyBool>()
-            && !value.is_instance_of::<pyo3::types::PyString>();
-    if !number {
-        return Err(
-            Error::invalid(name, format!("expected a number, got {}", short(value))).into(),
-        );
-    }
-    value.extract::<f64>().map_err(|_| {
-        Error::invalid(name, format!("expected a number, got {}", short(value))).into()
-    })
+    value.extract::<Real>()?.get(name)
 }
 
 /// A value for an error message, at most 60 characters.
@@ -221,11 +202,11 @@ fn fit_config_of(value: &Bound<PyAny>) -> PyResult<crate::fit::FitConfig> {
         let c = c.cast::<PyFitConfig>()?;
         return Ok(c.borrow().to_rust()?);
     }
-    Err(Error::invalid(
+    Err(super::convert::wrong_type(
         "fit",
-        format!("expected a FitConfig, a dict or None, got {}", short(value)),
-    )
-    .into())
+        "a FitConfig, a dict or None",
+        &short(value),
+    ))
 }
 
 /// The pose of one frame.
@@ -239,12 +220,12 @@ pub struct PyPoseResult {
 impl PyPoseResult {
     /// The 22 pose parameters.
     #[getter]
-    fn pose<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn pose<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, self.inner.pose.to_vec(), &[NUM_PARAMS])
     }
     /// The 15 joints (15, 3), camera frame, metres.
     #[getter]
-    fn joints<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let v = self
             .inner
             .joints
@@ -266,17 +247,17 @@ impl PyPoseResult {
     }
     /// The shape parameters of that model (`BodyModel.shape_names` order).
     #[getter]
-    fn shape<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn shape<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let v = self.inner.shape.to_vec().to_vec();
         let n = v.len();
         to_numpy(py, v, &[n])
     }
     #[getter]
-    fn labels<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<i16>> {
+    fn labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<i16>>> {
         to_numpy(py, self.inner.labels.clone(), &self.shape)
     }
     #[getter]
-    fn mask<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<bool>> {
+    fn mask<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
         to_numpy(py, self.inner.mask.clone(), &self.shape)
     }
     #[getter]
@@ -292,7 +273,7 @@ impl PyPoseResult {
         self.inner.converged
     }
     #[getter]
-    fn confidence<'py>(&self, py: Python<'py>) -> F64Array<'py> {
+    fn confidence<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         to_numpy(py, self.inner.confidence.to_vec(), &[NUM_JOINTS])
     }
     /// Milliseconds per stage, and `total` for the whole call.
@@ -339,7 +320,8 @@ impl PyPoseResult {
 
     /// This result with the stereo matching that made its depth (`ms` milliseconds)
     /// added to its timings, first, and to the total.
-    fn with_stereo_time(&self, ms: f64) -> PyResult<Self> {
+    fn with_stereo_time(&self, ms: Real) -> PyResult<Self> {
+        let ms = ms.get("ms")?;
         if !(ms.is_finite() && ms >= 0.0) {
             return Err(Error::invalid("ms", format!("must be finite and >= 0, got {ms}")).into());
         }
@@ -392,27 +374,44 @@ impl PyPoseResult {
     }
 }
 
+/// The arguments both native classes are made from, as Python passes them.
+struct EstimatorArgs<'a, 'py> {
+    camera: &'a Bound<'py, PyAny>,
+    templates: &'a Bound<'py, PyAny>,
+    model: Option<&'a Bound<'py, PyAny>>,
+    config: Option<&'a Bound<'py, PyAny>>,
+    background: Option<&'a Bound<'py, PyAny>>,
+}
+
 /// The parts of an estimator both native classes are made from.
-fn estimator_of(
-    camera: &PyCamera,
-    model: Option<&PyBodyModel>,
-    templates: &PyTemplateDatabase,
-    config: Option<&PyPipelineConfig>,
-    background: Option<&Bound<PyAny>>,
-) -> PyResult<Estimator> {
-    let bg = background
+fn estimator_of(a: &EstimatorArgs) -> PyResult<Estimator> {
+    let camera = camera_arg(a.camera, "camera")?;
+    let templates =
+        object::<PyTemplateDatabase>(a.templates, "templates", "a native template database")?;
+    let model = match a.model {
+        None => BodyModel::default(),
+        Some(m) => object::<PyBodyModel>(m, "model", "a depthpose.BodyModel or None")?
+            .inner
+            .clone(),
+    };
+    let config = match a.config {
+        None => PipelineConfig::default(),
+        Some(c) => object::<PyPipelineConfig>(c, "config", "a depthpose.PipelineConfig or None")?
+            .inner
+            .clone(),
+    };
+    let bg = a
+        .background
         .map(|b| depth_array(b, "background"))
         .transpose()?;
     if let Some(b) = &bg {
-        camera
-            .inner
-            .check_image("background", b.shape[0], b.shape[1])?;
+        camera.check_image("background", b.shape[0], b.shape[1])?;
     }
     Ok(Estimator::new(
-        &camera.inner,
-        model.map_or_else(BodyModel::default, |m| m.inner.clone()),
+        &camera,
+        model,
         templates.shared(),
-        config.map_or_else(PipelineConfig::default, |c| c.inner.clone()),
+        config,
         bg.as_ref().map(|b| b.data.as_slice()),
     )?)
 }
@@ -451,14 +450,21 @@ impl PyPoseEstimator {
     #[new]
     #[pyo3(signature = (camera, templates, *, model=None, config=None, background=None))]
     fn new(
-        camera: &PyCamera,
-        templates: &PyTemplateDatabase,
-        model: Option<&PyBodyModel>,
-        config: Option<&PyPipelineConfig>,
+        camera: &Bound<'_, PyAny>,
+        templates: &Bound<'_, PyAny>,
+        model: Option<&Bound<'_, PyAny>>,
+        config: Option<&Bound<'_, PyAny>>,
         background: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
+        let args = EstimatorArgs {
+            camera,
+            templates,
+            model,
+            config,
+            background,
+        };
         Ok(PyPoseEstimator {
-            inner: estimator_of(camera, model, templates, config, background)?,
+            inner: estimator_of(&args)?,
         })
     }
 
@@ -494,7 +500,7 @@ impl PyPoseEstimator {
             self.inner.discrepancies_of(&frame, &poses)
         })?;
         let n = v.len();
-        Ok(to_numpy(py, v, &[n]))
+        to_numpy(py, v, &[n])
     }
 
     /// The rest-pose penalty of each of `poses` with this config's weight.
@@ -502,7 +508,7 @@ impl PyPoseEstimator {
         let poses = poses_arg(poses, "poses")?;
         let v: Vec<f64> = poses.iter().map(|p| self.inner.penalty(p)).collect();
         let n = v.len();
-        Ok(to_numpy(py, v, &[n]))
+        to_numpy(py, v, &[n])
     }
 
     /// The person's pixels of a frame as the estimator finds them.
@@ -516,7 +522,7 @@ impl PyPoseEstimator {
             let frame = self.inner.prepare(&a.depth, None, None)?;
             Ok(self.inner.resolution().upsample(&frame.mask, false))
         })?;
-        Ok(to_numpy(py, m, &a.shape))
+        to_numpy(py, m, &a.shape)
     }
 
     #[getter]
@@ -557,16 +563,26 @@ impl PyPoseTracker {
     #[new]
     #[pyo3(signature = (camera, templates, *, model=None, config=None, background=None, calibrate=None))]
     fn new(
-        camera: &PyCamera,
-        templates: &PyTemplateDatabase,
-        model: Option<&PyBodyModel>,
-        config: Option<&PyPipelineConfig>,
+        camera: &Bound<'_, PyAny>,
+        templates: &Bound<'_, PyAny>,
+        model: Option<&Bound<'_, PyAny>>,
+        config: Option<&Bound<'_, PyAny>>,
         background: Option<&Bound<'_, PyAny>>,
-        calibrate: Option<bool>,
+        calibrate: Option<Flag>,
     ) -> PyResult<Self> {
-        let est = estimator_of(camera, model, templates, config, background)?;
+        let calibrate = match &calibrate {
+            Some(c) => c.get("calibrate")?,
+            None => model.is_none(),
+        };
+        let args = EstimatorArgs {
+            camera,
+            templates,
+            model,
+            config,
+            background,
+        };
         Ok(PyPoseTracker {
-            inner: Tracker::new(est, calibrate.unwrap_or(model.is_none())),
+            inner: Tracker::new(estimator_of(&args)?, calibrate),
         })
     }
 
@@ -586,9 +602,10 @@ impl PyPoseTracker {
         })
     }
 
-    #[pyo3(signature = (shape=false))]
-    fn reset(&mut self, shape: bool) {
-        self.inner.reset(shape);
+    #[pyo3(signature = (shape=Flag::new(false)))]
+    fn reset(&mut self, shape: Flag) -> PyResult<()> {
+        self.inner.reset(shape.get("shape")?);
+        Ok(())
     }
 
     fn start_from(&mut self, pose: &Bound<'_, PyAny>) -> PyResult<()> {
@@ -637,11 +654,14 @@ impl PyPoseTracker {
         self.inner.calibration().result.is_some()
     }
     #[getter]
-    fn shape_factors<'py>(&self, py: Python<'py>) -> Option<F64Array<'py>> {
-        self.inner.shape_factors().map(|f| {
-            let n = f.len();
-            to_numpy(py, f.to_vec(), &[n])
-        })
+    fn shape_factors<'py>(&self, py: Python<'py>) -> PyResult<Option<F64Array<'py>>> {
+        self.inner
+            .shape_factors()
+            .map(|f| {
+                let n = f.len();
+                to_numpy(py, f.to_vec(), &[n])
+            })
+            .transpose()
     }
     #[getter]
     fn calibration(&self) -> Option<PyShapeFitResult> {
@@ -670,14 +690,14 @@ impl PyPoseTracker {
 #[pyfunction]
 fn swap_limbs<'py>(py: Python<'py>, pose: &Bound<'py, PyAny>) -> PyResult<F64Array<'py>> {
     let p = pose_arg(pose, "pose")?;
-    Ok(to_numpy(py, swap(&p).to_vec(), &[NUM_PARAMS]))
+    to_numpy(py, swap(&p).to_vec(), &[NUM_PARAMS])
 }
 
 /// The mirror image of the pose in the camera's vertical plane through the hip centre.
 #[pyfunction]
 fn mirror_view<'py>(py: Python<'py>, pose: &Bound<'py, PyAny>) -> PyResult<F64Array<'py>> {
     let p = pose_arg(pose, "pose")?;
-    Ok(to_numpy(py, mirror(&p).to_vec(), &[NUM_PARAMS]))
+    to_numpy(py, mirror(&p).to_vec(), &[NUM_PARAMS])
 }
 
 /// `weight` × Σ θ² over the 14 limb angles of each pose: (N, 22) → (N,), (22,) → (1,).
@@ -685,8 +705,9 @@ fn mirror_view<'py>(py: Python<'py>, pose: &Bound<'py, PyAny>) -> PyResult<F64Ar
 fn rest_pose_penalty<'py>(
     py: Python<'py>,
     poses: &Bound<'py, PyAny>,
-    weight: f64,
+    weight: Real,
 ) -> PyResult<F64Array<'py>> {
+    let weight = weight.get("weight")?;
     if !(weight.is_finite() && weight >= 0.0) {
         return Err(
             Error::invalid("weight", format!("must be finite and >= 0, got {weight}")).into(),
@@ -709,7 +730,7 @@ fn rest_pose_penalty<'py>(
         .collect::<crate::Result<_>>()?;
     let v: Vec<f64> = poses.iter().map(|p| penalty(p, weight)).collect();
     let n = v.len();
-    Ok(to_numpy(py, v, &[n]))
+    to_numpy(py, v, &[n])
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,7 +1,6 @@
 //! Person segmentation for Python: `segment_person` and its `Segmentation` result.
 
-use super::arrays::{depth_array, to_numpy};
-use super::camera::PyCamera;
+use super::convert::{camera as camera_arg, depth_array, object, to_numpy};
 use super::native;
 use crate::cloud::DepthView;
 use crate::segment::{
@@ -120,7 +119,7 @@ pub struct PySegmentation {
 #[pymethods]
 impl PySegmentation {
     #[getter]
-    fn mask<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<bool>> {
+    fn mask<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
         to_numpy(py, self.inner.mask.clone(), &self.shape)
     }
     #[getter]
@@ -166,15 +165,23 @@ impl PySegmentation {
 fn segment_person<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'py, PyAny>,
     background: Option<&Bound<'py, PyAny>>,
-    previous: Option<&Bound<'py, PySegmentation>>,
+    previous: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<PySegmentation> {
+    let camera = camera_arg(camera, "camera")?;
+    let hint: Option<SegmentHint> = match previous {
+        Some(p) => Some(
+            object::<PySegmentation>(p, "previous", "a Segmentation or None")?
+                .inner
+                .hint(),
+        ),
+        None => None,
+    };
     let d = depth_array(depth, "depth")?;
     let bg = background
         .map(|b| depth_array(b, "background"))
         .transpose()?;
-    let hint: Option<SegmentHint> = previous.map(|p| p.get().inner.hint());
     let seg = native(py, || -> PyResult<Segmentation> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
         let bgv = match &bg {
@@ -188,7 +195,7 @@ fn segment_person<'py>(
         };
         Ok(segment(
             &view,
-            &camera.inner,
+            &camera,
             bgv.as_ref(),
             &SegmentConfig::default(),
             hint.as_ref(),

@@ -1,12 +1,13 @@
 //! Stereo matching (Growing Correspondence Seeds) and disparity → depth, for Python.
 
-use super::arrays::{count, count_opt, f32_array, f64_array, seed as arg_seed, to_numpy, Arr};
+use super::convert::{
+    f32_array, f64_array, image_f32, invalid, to_numpy, Arr, Flag, Int, Real, Text,
+};
 use super::native;
 use crate::stereo::{
     depth_from_disparity as depth_of, gray_from_rgb, match_stereo_seeded, Seed, Similarity,
     StereoConfig,
 };
-use crate::Error;
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
@@ -15,7 +16,7 @@ type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
 /// A gray image (H, W) from a gray (H, W), (H, W, 1) or colour (H, W, 3|4) array of any
 /// numeric dtype; colour by luma, alpha ignored.
 fn gray_image(obj: &Bound<PyAny>, name: &str) -> PyResult<Arr<f32>> {
-    let a = f32_array(obj, name, None, true)?;
+    let a = image_f32(obj, name)?;
     match a.shape.as_slice() {
         [_, _] => Ok(a),
         [h, w, 1] => Ok(Arr {
@@ -33,11 +34,10 @@ fn gray_image(obj: &Bound<PyAny>, name: &str) -> PyResult<Arr<f32>> {
                 shape: vec![*h, *w],
             })
         }
-        s => Err(Error::invalid(
+        s => Err(invalid(
             name,
             format!("expected a gray (H, W) or colour (H, W, 3) image, got shape {s:?}"),
-        )
-        .into()),
+        )),
     }
 }
 
@@ -45,11 +45,13 @@ fn similarity_of(name: &str) -> PyResult<Similarity> {
     match name {
         "mncc" => Ok(Similarity::Mncc),
         "ncc" => Ok(Similarity::Ncc),
-        other => Err(Error::invalid(
+        other => Err(invalid(
             "similarity",
-            format!("must be 'mncc' or 'ncc', got {other:?}"),
-        )
-        .into()),
+            format!(
+                "must be 'mncc' or 'ncc', got {}",
+                crate::error::brief_text(other)
+            ),
+        )),
     }
 }
 
@@ -57,22 +59,25 @@ fn similarity_of(name: &str) -> PyResult<Similarity> {
 fn seeds_of(obj: &Bound<PyAny>) -> PyResult<Vec<Seed>> {
     let a = f64_array(obj, "seeds", Some(2), true)?;
     if a.shape[1] != 3 {
-        return Err(Error::invalid(
+        return Err(invalid(
             "seeds",
             format!("expected shape (N, 3) of rows (x, y, d), got {:?}", a.shape),
-        )
-        .into());
+        ));
     }
     a.data
         .chunks_exact(3)
         .enumerate()
         .map(|(i, r)| {
-            if r.iter().any(|&v| v < -0.5) {
-                return Err(Error::invalid(
+            if r.iter().any(|&v| !(-0.5..=1e9).contains(&v)) {
+                return Err(invalid(
                     "seeds",
-                    format!("seed {i} has a negative coordinate: {r:?}"),
-                )
-                .into());
+                    format!(
+                        "seed {i} = ({}, {}, {}) is not a pixel (x, y, d >= 0)",
+                        crate::error::brief(r[0]),
+                        crate::error::brief(r[1]),
+                        crate::error::brief(r[2])
+                    ),
+                ));
             }
             Ok(Seed {
                 x: r[0].round() as usize,
@@ -86,81 +91,99 @@ fn seeds_of(obj: &Bound<PyAny>) -> PyResult<Vec<Seed>> {
 /// Disparity (H, W) float32 (NaN unmatched) and confidence (the correlation of each
 /// accepted match, NaN unmatched) of a rectified pair by Growing Correspondence Seeds.
 #[pyfunction]
-#[pyo3(signature = (left, right, max_disparity=None, window=5, threshold=None, num_seeds=None,
-    seeds=None, seed=0, lr_check=false, subpixel=true, fill_gaps=true, seed_distinctness=None,
-    min_texture=None, min_segment=None, similarity="mncc"))]
+#[pyo3(signature = (left, right, max_disparity=None, window=Int::new(5), threshold=None, num_seeds=None,
+    seeds=None, seed=Int::new(0), lr_check=Flag::new(false), subpixel=Flag::new(true),
+    fill_gaps=Flag::new(true), seed_distinctness=None, min_texture=None, min_segment=None,
+    similarity=None))]
 #[allow(clippy::too_many_arguments)]
 fn stereo_match<'py>(
     py: Python<'py>,
     left: &Bound<'py, PyAny>,
     right: &Bound<'py, PyAny>,
-    max_disparity: Option<i128>,
-    window: i128,
-    threshold: Option<f32>,
-    num_seeds: Option<i128>,
+    max_disparity: Option<Int>,
+    window: Int,
+    threshold: Option<Real>,
+    num_seeds: Option<Int>,
     seeds: Option<&Bound<'py, PyAny>>,
-    seed: i128,
-    lr_check: bool,
-    subpixel: bool,
-    fill_gaps: bool,
-    seed_distinctness: Option<f32>,
-    min_texture: Option<f32>,
-    min_segment: Option<i128>,
-    similarity: &str,
+    seed: Int,
+    lr_check: Flag,
+    subpixel: Flag,
+    fill_gaps: Flag,
+    seed_distinctness: Option<Real>,
+    min_texture: Option<Real>,
+    min_segment: Option<Int>,
+    similarity: Option<Text>,
 ) -> PyResult<(F32Array<'py>, F32Array<'py>)> {
-    let max_disparity = count_opt(max_disparity, "max_disparity")?;
-    let window = count(window, "window")?;
-    let num_seeds = count_opt(num_seeds, "num_seeds")?;
-    let seed = arg_seed(seed, "seed")?;
-    let min_segment = count_opt(min_segment, "min_segment")?;
+    let d = StereoConfig::default();
+    let real = |v: Option<Real>, default: f32, name: &str| -> PyResult<f32> {
+        v.map_or(Ok(default), |v| v.get_f32(name))
+    };
+    let count = |v: Option<Int>, name: &str| v.map(|v| v.count(name)).transpose();
+    let similarity = match &similarity {
+        Some(s) => similarity_of(s.get("similarity")?)?,
+        None => Similarity::Mncc,
+    };
+    let config = StereoConfig {
+        window: window.count("window")?,
+        threshold: real(threshold, d.threshold, "threshold")?,
+        num_seeds: count(num_seeds, "num_seeds")?.unwrap_or(d.num_seeds),
+        max_disparity: count(max_disparity, "max_disparity")?,
+        seed_distinctness: real(seed_distinctness, d.seed_distinctness, "seed_distinctness")?,
+        min_texture: real(min_texture, d.min_texture, "min_texture")?,
+        similarity,
+        lr_check: lr_check.get("lr_check")?,
+        subpixel: subpixel.get("subpixel")?,
+        fill_gaps: fill_gaps.get("fill_gaps")?,
+        min_segment: count(min_segment, "min_segment")?.unwrap_or(d.min_segment),
+        rng_seed: seed.seed("seed")?,
+    };
     let l = gray_image(left, "left")?;
     let r = gray_image(right, "right")?;
     if l.shape != r.shape {
-        return Err(Error::invalid(
+        return Err(invalid(
             "right",
             format!("shape {:?} does not match left {:?}", r.shape, l.shape),
-        )
-        .into());
+        ));
     }
     let user = seeds.map(seeds_of).transpose()?.unwrap_or_default();
-    let d = StereoConfig::default();
-    let config = StereoConfig {
-        window,
-        threshold: threshold.unwrap_or(d.threshold),
-        num_seeds: num_seeds.unwrap_or(d.num_seeds),
-        max_disparity,
-        seed_distinctness: seed_distinctness.unwrap_or(d.seed_distinctness),
-        min_texture: min_texture.unwrap_or(d.min_texture),
-        similarity: similarity_of(similarity)?,
-        lr_check,
-        subpixel,
-        fill_gaps,
-        min_segment: min_segment.unwrap_or(d.min_segment),
-        rng_seed: seed,
-    };
     let (h, w) = (l.shape[0], l.shape[1]);
     let res = native(py, || {
         match_stereo_seeded(&l.data, &r.data, h, w, &config, &user)
     })?;
     Ok((
-        to_numpy(py, res.disparity, &[h, w]),
-        to_numpy(py, res.confidence, &[h, w]),
+        to_numpy(py, res.disparity, &[h, w])?,
+        to_numpy(py, res.confidence, &[h, w])?,
     ))
 }
 
 /// Depth in metres Z = baseline · focal / (d + doffs), 0 where there is no disparity.
+/// A depth beyond the float32 range (a disparity within ~1e-38 of −doffs) is refused.
 #[pyfunction]
-#[pyo3(signature = (disparity, focal, baseline, doffs=0.0))]
+#[pyo3(signature = (disparity, focal, baseline, doffs=Real::new(0.0)))]
 fn depth_from_disparity<'py>(
     py: Python<'py>,
     disparity: &Bound<'py, PyAny>,
-    focal: f64,
-    baseline: f64,
-    doffs: f64,
+    focal: Real,
+    baseline: Real,
+    doffs: Real,
 ) -> PyResult<F32Array<'py>> {
+    let (focal, baseline) = (focal.get("focal")?, baseline.get("baseline")?);
+    let doffs = doffs.get("doffs")?;
     let d = f32_array(disparity, "disparity", Some(2), false)?;
     let z = native(py, || depth_of(&d.data, focal, baseline, doffs))?;
-    Ok(to_numpy(py, z, &d.shape))
+    if let Some(k) = z.iter().position(|v| !v.is_finite()) {
+        let w = d.shape[1];
+        return Err(invalid(
+            "disparity",
+            format!(
+                "the depth at row {}, column {} (disparity {}) is beyond the float32 range",
+                k / w,
+                k % w,
+                crate::error::brief(d.data[k] as f64)
+            ),
+        ));
+    }
+    to_numpy(py, z, &d.shape)
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -1,9 +1,11 @@
 //! Surface-context descriptors and the template database, for Python.
 
-use super::arrays::{
-    bool_array, count, depth_array, f32_array, f64_array, i64_array, seed as arg_seed, to_numpy,
-};
+use super::body::check_mesh_bytes;
 use super::camera::PyCamera;
+use super::convert::{
+    bool_array, camera as camera_arg, check_fit_points, check_result_bytes, counts, depth_array,
+    f32_array, f64_array, i64_array, invalid, to_numpy, wrong_type, Int, Real, Text,
+};
 use super::native;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{BodyModel, BodyShape, NUM_JOINTS, NUM_PARAMS, NUM_SHAPE_PARAMS};
@@ -13,7 +15,6 @@ use crate::templates::{
     config_from_vec, template_pose, MatchConfig, TemplateArrays, TemplateConfig, TemplateDatabase,
     TemplateRenderer, MAX_SEED, NUM_TEMPLATES,
 };
-use crate::Error;
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -28,57 +29,94 @@ fn model_of(shape: Option<&Bound<PyAny>>) -> PyResult<BodyModel> {
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn config_of(
-    width: i128,
-    height: i128,
-    distance: f64,
-    field_height: f64,
-    renderer: &str,
-    samples: i128,
-    radial_bins: i128,
-    angular_bins: i128,
-    seed: i128,
-    depth_weight: f64,
-) -> PyResult<TemplateConfig> {
-    let (width, height) = (count(width, "width")?, count(height, "height")?);
-    let samples = count(samples, "samples")?;
-    let radial_bins = count(radial_bins, "radial_bins")?;
-    let angular_bins = count(angular_bins, "angular_bins")?;
-    let seed = arg_seed(seed, "seed")?;
-    let renderer = match renderer {
-        "superquadric" => TemplateRenderer::Superquadric,
-        "ellipsoid" => TemplateRenderer::Ellipsoid,
-        other => {
-            return Err(Error::invalid(
-                "renderer",
-                format!("must be 'superquadric' or 'ellipsoid', got {other:?}"),
-            )
-            .into())
+/// The template settings as Python passes them (see `TemplateDatabase.build`).
+struct Settings {
+    width: Int,
+    height: Int,
+    distance: Real,
+    field_height: Real,
+    renderer: Option<Text>,
+    samples: Int,
+    radial_bins: Int,
+    angular_bins: Int,
+    seed: Int,
+    depth_weight: Real,
+}
+
+impl Settings {
+    /// The defaults but for the image settings (for rendering one template).
+    fn image_only(
+        width: Int,
+        height: Int,
+        distance: Real,
+        field_height: Real,
+        renderer: Option<Text>,
+    ) -> Self {
+        let d = TemplateConfig::default().descriptor;
+        Settings {
+            width,
+            height,
+            distance,
+            field_height,
+            renderer,
+            samples: Int::new(d.samples as i128),
+            radial_bins: Int::new(d.radial_bins as i128),
+            angular_bins: Int::new(d.angular_bins as i128),
+            seed: Int::new(d.seed as i128),
+            depth_weight: Real::new(d.depth_weight),
         }
-    };
-    if seed >= MAX_SEED {
-        return Err(Error::invalid("seed", format!("must be < 2**53, got {seed}")).into());
     }
-    let d = TemplateConfig::default();
-    let c = TemplateConfig {
-        width,
-        height,
-        distance,
-        field_height,
-        renderer,
-        descriptor: DescriptorConfig {
-            samples,
-            radial_bins,
-            angular_bins,
-            seed,
-            depth_weight,
-            ..d.descriptor
-        },
-        ..d
-    };
-    c.validate()?;
-    Ok(c)
+
+    /// The checked configuration.
+    fn config(&self) -> PyResult<TemplateConfig> {
+        let renderer = match &self.renderer {
+            None => TemplateRenderer::Superquadric,
+            Some(r) => match r.get("renderer")? {
+                "superquadric" => TemplateRenderer::Superquadric,
+                "ellipsoid" => TemplateRenderer::Ellipsoid,
+                other => {
+                    return Err(invalid(
+                        "renderer",
+                        format!(
+                            "must be 'superquadric' or 'ellipsoid', got {}",
+                            crate::error::brief_text(other)
+                        ),
+                    ))
+                }
+            },
+        };
+        let seed = self.seed.in_range(0, MAX_SEED as i128 - 1, "seed")? as u64;
+        let d = TemplateConfig::default();
+        let c = TemplateConfig {
+            width: self.width.count("width")?,
+            height: self.height.count("height")?,
+            distance: self.distance.get("distance")?,
+            field_height: self.field_height.get("field_height")?,
+            renderer,
+            descriptor: DescriptorConfig {
+                samples: self.samples.count("samples")?,
+                radial_bins: self.radial_bins.count("radial_bins")?,
+                angular_bins: self.angular_bins.count("angular_bins")?,
+                seed,
+                depth_weight: self.depth_weight.get("depth_weight")?,
+                ..d.descriptor
+            },
+            ..d
+        };
+        c.validate()?;
+        Ok(c)
+    }
+
+    /// [`Self::config`] for a whole database, whose descriptors must fit
+    /// `MAX_RESULT_BYTES`.
+    fn database_config(&self) -> PyResult<TemplateConfig> {
+        let c = self.config()?;
+        let bytes = NUM_TEMPLATES
+            .checked_mul(c.descriptor.samples)
+            .and_then(|n| n.checked_mul(c.descriptor.dim() * 4 + 16));
+        check_result_bytes(bytes, "samples", "the template descriptors")?;
+        Ok(c)
+    }
 }
 
 /// (vertices, faces) of a mesh.
@@ -88,42 +126,46 @@ type MeshArrays<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>
 /// or 4·bins with `depth_weight` > 0)
 /// float32, sample pixels (N, 2) float32 as [u, v], normalised positions (N, 2)).
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, *, samples=100, radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0))]
+#[pyo3(signature = (depth, camera, mask=None, *, samples=Int::new(100), radial_bins=Int::new(5),
+                    angular_bins=Int::new(12), seed=Int::new(0), depth_weight=Real::new(0.0)))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn surface_context<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
-    camera: &PyCamera,
+    camera: &Bound<'py, PyAny>,
     mask: Option<&Bound<'py, PyAny>>,
-    samples: i128,
-    radial_bins: i128,
-    angular_bins: i128,
-    seed: i128,
-    depth_weight: f64,
+    samples: Int,
+    radial_bins: Int,
+    angular_bins: Int,
+    seed: Int,
+    depth_weight: Real,
 ) -> PyResult<(
     Bound<'py, PyArrayDyn<f32>>,
     Bound<'py, PyArrayDyn<f32>>,
     Bound<'py, PyArrayDyn<f32>>,
 )> {
-    let d = depth_array(depth, "depth")?;
-    let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+    let cam = camera_arg(camera, "camera")?;
     let cfg = DescriptorConfig {
-        samples: count(samples, "samples")?,
-        radial_bins: count(radial_bins, "radial_bins")?,
-        angular_bins: count(angular_bins, "angular_bins")?,
-        seed: arg_seed(seed, "seed")?,
-        depth_weight,
+        samples: samples.count("samples")?,
+        radial_bins: radial_bins.count("radial_bins")?,
+        angular_bins: angular_bins.count("angular_bins")?,
+        seed: seed.seed("seed")?,
+        depth_weight: depth_weight.get("depth_weight")?,
         ..Default::default()
     };
+    cfg.validate()?;
+    let d = depth_array(depth, "depth")?;
+    let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+    check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
     let sc = native(py, || -> crate::Result<_> {
         let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
-        surface_context_from_depth(&view, &camera.inner, m.as_deref(), &cfg)
+        surface_context_from_depth(&view, &cam, m.as_deref(), &cfg)
     })?;
     let n = sc.len();
     Ok((
-        to_numpy(py, sc.descriptors, &[n, sc.dim]),
-        to_numpy(py, sc.pixels.into_iter().flatten().collect(), &[n, 2]),
-        to_numpy(py, sc.positions.into_iter().flatten().collect(), &[n, 2]),
+        to_numpy(py, sc.descriptors, &[n, sc.dim])?,
+        to_numpy(py, sc.pixels.into_iter().flatten().collect(), &[n, 2])?,
+        to_numpy(py, sc.positions.into_iter().flatten().collect(), &[n, 2])?,
     ))
 }
 
@@ -145,27 +187,28 @@ impl PyTemplateDatabase {
     /// Renders and describes all templates; `progress(done, total)` is called after
     /// each chunk.
     #[staticmethod]
-    #[pyo3(signature = (model_shape=None, *, width=96, height=96, distance=3.0, field_height=2.4,
-                        renderer="superquadric", samples=100, radial_bins=5, angular_bins=12,
-                        seed=0, depth_weight=0.0, progress=None))]
+    #[pyo3(signature = (model_shape=None, *, width=Int::new(96), height=Int::new(96),
+                        distance=Real::new(3.0), field_height=Real::new(2.4), renderer=None,
+                        samples=Int::new(100), radial_bins=Int::new(5), angular_bins=Int::new(12),
+                        seed=Int::new(0), depth_weight=Real::new(0.0), progress=None))]
     #[allow(clippy::too_many_arguments)]
     fn build(
         py: Python<'_>,
         model_shape: Option<&Bound<PyAny>>,
-        width: i128,
-        height: i128,
-        distance: f64,
-        field_height: f64,
-        renderer: &str,
-        samples: i128,
-        radial_bins: i128,
-        angular_bins: i128,
-        seed: i128,
-        depth_weight: f64,
+        width: Int,
+        height: Int,
+        distance: Real,
+        field_height: Real,
+        renderer: Option<Text>,
+        samples: Int,
+        radial_bins: Int,
+        angular_bins: Int,
+        seed: Int,
+        depth_weight: Real,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
-        let cfg = config_of(
+        let cfg = Settings {
             width,
             height,
             distance,
@@ -176,7 +219,21 @@ impl PyTemplateDatabase {
             angular_bins,
             seed,
             depth_weight,
-        )?;
+        }
+        .database_config()?;
+        if let Some(cb) = &progress {
+            if !cb.bind(py).is_callable() {
+                return Err(wrong_type(
+                    "progress",
+                    "a callable or None",
+                    &cb.bind(py)
+                        .get_type()
+                        .name()
+                        .map(|n| n.to_string())
+                        .unwrap_or_default(),
+                ));
+            }
+        }
         let mut callback_error: Option<PyErr> = None;
         let db = native(py, || {
             TemplateDatabase::build_with_progress(&model, &cfg, |done, total| {
@@ -200,47 +257,49 @@ impl PyTemplateDatabase {
     /// A database from template depth images rendered elsewhere: `depths` (768, H, W)
     /// float32 metres for the camera of the settings, in template order.
     #[staticmethod]
-    #[pyo3(signature = (depths, model_shape=None, *, width=96, height=96, distance=3.0,
-                        field_height=2.4, samples=100, radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0))]
+    #[pyo3(signature = (depths, model_shape=None, *, width=Int::new(96), height=Int::new(96),
+                        distance=Real::new(3.0), field_height=Real::new(2.4), samples=Int::new(100),
+                        radial_bins=Int::new(5), angular_bins=Int::new(12), seed=Int::new(0),
+                        depth_weight=Real::new(0.0)))]
     #[allow(clippy::too_many_arguments)]
     fn from_depths(
         py: Python<'_>,
         depths: &Bound<PyAny>,
         model_shape: Option<&Bound<PyAny>>,
-        width: i128,
-        height: i128,
-        distance: f64,
-        field_height: f64,
-        samples: i128,
-        radial_bins: i128,
-        angular_bins: i128,
-        seed: i128,
-        depth_weight: f64,
+        width: Int,
+        height: Int,
+        distance: Real,
+        field_height: Real,
+        samples: Int,
+        radial_bins: Int,
+        angular_bins: Int,
+        seed: Int,
+        depth_weight: Real,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
-        let cfg = config_of(
+        let cfg = Settings {
             width,
             height,
             distance,
             field_height,
-            "superquadric",
+            renderer: None,
             samples,
             radial_bins,
             angular_bins,
             seed,
             depth_weight,
-        )?;
+        }
+        .database_config()?;
         let d = f32_array(depths, "depths", Some(3), false)?;
         let (height, width) = (cfg.height, cfg.width);
         if d.shape != [NUM_TEMPLATES, height, width] {
-            return Err(Error::invalid(
+            return Err(invalid(
                 "depths",
                 format!(
                     "expected shape ({NUM_TEMPLATES}, {height}, {width}), got {:?}",
                     d.shape
                 ),
-            )
-            .into());
+            ));
         }
         let db = native(py, || TemplateDatabase::from_depths(&model, &cfg, &d.data))?;
         Ok(PyTemplateDatabase {
@@ -250,59 +309,45 @@ impl PyTemplateDatabase {
 
     /// Depth image (H, W) float32 of template `index` rendered in Rust.
     #[staticmethod]
-    #[pyo3(signature = (index, model_shape=None, *, width=96, height=96, distance=3.0,
-                        field_height=2.4, renderer="superquadric"))]
+    #[pyo3(signature = (index, model_shape=None, *, width=Int::new(96), height=Int::new(96),
+                        distance=Real::new(3.0), field_height=Real::new(2.4), renderer=None))]
     #[allow(clippy::too_many_arguments)]
     fn render_template<'py>(
         py: Python<'py>,
-        index: i128,
+        index: Int,
         model_shape: Option<&Bound<'py, PyAny>>,
-        width: i128,
-        height: i128,
-        distance: f64,
-        field_height: f64,
-        renderer: &str,
+        width: Int,
+        height: Int,
+        distance: Real,
+        field_height: Real,
+        renderer: Option<Text>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let index = index.in_range(0, NUM_TEMPLATES as i128 - 1, "index")? as usize;
         let model = model_of(model_shape)?;
-        let d = TemplateConfig::default();
-        let cfg = config_of(
-            width,
-            height,
-            distance,
-            field_height,
-            renderer,
-            d.descriptor.samples as i128,
-            d.descriptor.radial_bins as i128,
-            d.descriptor.angular_bins as i128,
-            d.descriptor.seed as i128,
-            d.descriptor.depth_weight,
-        )?;
-        let index = count(index, "index")?;
+        let cfg = Settings::image_only(width, height, distance, field_height, renderer).config()?;
         let depth = native(py, || {
             crate::templates::render_template(&model, &cfg, index)
         })?;
-        Ok(to_numpy(py, depth, &[cfg.height, cfg.width]))
+        to_numpy(py, depth, &[cfg.height, cfg.width])
     }
 
     /// Super-quadric meshes of template `index` (all segments in one mesh, template
     /// camera frame): (vertices (V, 3) float64, faces (F, 3) int64).
     #[staticmethod]
-    #[pyo3(signature = (index, model_shape=None, *, distance=3.0, rings=16, sectors=20))]
+    #[pyo3(signature = (index, model_shape=None, *, distance=Real::new(3.0), rings=Int::new(16),
+                        sectors=Int::new(20)))]
     fn template_mesh<'py>(
         py: Python<'py>,
-        index: i128,
+        index: Int,
         model_shape: Option<&Bound<'py, PyAny>>,
-        distance: f64,
-        rings: i128,
-        sectors: i128,
+        distance: Real,
+        rings: Int,
+        sectors: Int,
     ) -> PyResult<MeshArrays<'py>> {
-        let index = count(index, "index")?;
-        let (rings, sectors) = (count(rings, "rings")?, count(sectors, "sectors")?);
-        if index >= NUM_TEMPLATES {
-            return Err(
-                Error::invalid("index", format!("must be < {NUM_TEMPLATES}, got {index}")).into(),
-            );
-        }
+        let index = index.in_range(0, NUM_TEMPLATES as i128 - 1, "index")? as usize;
+        let (rings, sectors) = (rings.count("rings")?, sectors.count("sectors")?);
+        check_mesh_bytes(rings, sectors, crate::body::NUM_SEGMENTS)?;
+        let distance = distance.get("distance")?;
         crate::error::ensure_positive(distance, "distance")?;
         let model = model_of(model_shape)?;
         let meshes = native(py, || {
@@ -318,63 +363,62 @@ impl PyTemplateDatabase {
             f.extend(m.faces.iter().flatten().map(|&i| base + i as i64));
         }
         let (nv, nf) = (v.len() / 3, f.len() / 3);
-        Ok((to_numpy(py, v, &[nv, 3]), to_numpy(py, f, &[nf, 3])))
+        Ok((to_numpy(py, v, &[nv, 3])?, to_numpy(py, f, &[nf, 3])?))
     }
 
     /// Matches the body in `depth` (H, W) metres; candidates best first, as dicts with
     /// index, view, pose (22,), joints (15, 3), cost, prune_cost, scale; and the short
     /// list of the pruning stage.
-    #[pyo3(signature = (depth, camera, mask=None, *, top_k=5, shortlist=16, representatives=8,
-                        location_weight=0.1, dummy_cost=0.15, rerank=0))]
+    #[pyo3(signature = (depth, camera, mask=None, *, top_k=Int::new(5), shortlist=Int::new(16),
+                        representatives=Int::new(8), location_weight=Real::new(0.1),
+                        dummy_cost=Real::new(0.15), rerank=Int::new(0)))]
     #[allow(clippy::too_many_arguments)]
     fn match_depth<'py>(
         &self,
         py: Python<'py>,
         depth: &Bound<'py, PyAny>,
-        camera: &PyCamera,
+        camera: &Bound<'py, PyAny>,
         mask: Option<&Bound<'py, PyAny>>,
-        top_k: i128,
-        shortlist: i128,
-        representatives: i128,
-        location_weight: f64,
-        dummy_cost: f64,
-        rerank: i128,
+        top_k: Int,
+        shortlist: Int,
+        representatives: Int,
+        location_weight: Real,
+        dummy_cost: Real,
+        rerank: Int,
     ) -> PyResult<(Vec<Bound<'py, PyDict>>, Vec<usize>)> {
-        let top_k = count(top_k, "top_k")?;
-        let rerank = count(rerank, "rerank")?;
-        let shortlist = count(shortlist, "shortlist")?;
-        let representatives = count(representatives, "representatives")?;
-        let d = depth_array(depth, "depth")?;
-        if d.shape.len() != 2 {
-            return Err(Error::invalid("depth", "must be a 2-D image").into());
-        }
-        let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+        let cam = camera_arg(camera, "camera")?;
+        let top_k = top_k.count("top_k")?;
+        let rerank = rerank.count("rerank")?;
+        let shortlist = shortlist.count("shortlist")?;
         let cfg = MatchConfig {
             top_k,
             shortlist: shortlist.max(top_k).max(rerank),
-            representatives,
-            location_weight,
-            dummy_cost,
+            representatives: representatives.count("representatives")?,
+            location_weight: location_weight.get("location_weight")?,
+            dummy_cost: dummy_cost.get("dummy_cost")?,
             rerank,
         };
+        cfg.validate()?;
+        let d = depth_array(depth, "depth")?;
+        let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
+        check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
         let r = native(py, || -> crate::Result<_> {
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
-            self.inner
-                .match_depth(&view, &camera.inner, m.as_deref(), &cfg)
+            self.inner.match_depth(&view, &cam, m.as_deref(), &cfg)
         })?;
         let mut out = Vec::with_capacity(r.candidates.len());
         for c in r.candidates {
             let dict = PyDict::new(py);
             dict.set_item("index", c.index)?;
             dict.set_item("view", c.view)?;
-            dict.set_item("pose", to_numpy(py, c.pose.to_vec(), &[NUM_PARAMS]))?;
+            dict.set_item("pose", to_numpy(py, c.pose.to_vec(), &[NUM_PARAMS])?)?;
             dict.set_item(
                 "joints",
                 to_numpy(
                     py,
                     c.joints.iter().flatten().copied().collect(),
                     &[NUM_JOINTS, 3],
-                ),
+                )?,
             )?;
             dict.set_item("cost", c.cost)?;
             dict.set_item("prune_cost", c.prune_cost)?;
@@ -386,30 +430,44 @@ impl PyTemplateDatabase {
 
     /// Exact matching costs of the body in `depth` against the given templates (no
     /// pruning): for measuring the pruning stage.
-    #[pyo3(signature = (depth, camera, indices, mask=None, *, location_weight=0.1, dummy_cost=0.15))]
+    #[pyo3(signature = (depth, camera, indices, mask=None, *, location_weight=Real::new(0.1),
+                        dummy_cost=Real::new(0.15)))]
     #[allow(clippy::too_many_arguments)]
     fn exact_costs(
         &self,
         py: Python<'_>,
         depth: &Bound<PyAny>,
-        camera: &PyCamera,
-        indices: Vec<usize>,
+        camera: &Bound<PyAny>,
+        indices: &Bound<PyAny>,
         mask: Option<&Bound<PyAny>>,
-        location_weight: f64,
-        dummy_cost: f64,
+        location_weight: Real,
+        dummy_cost: Real,
     ) -> PyResult<Vec<f64>> {
+        let cam = camera_arg(camera, "camera")?;
+        let (location_weight, dummy_cost) = (
+            location_weight.get("location_weight")?,
+            dummy_cost.get("dummy_cost")?,
+        );
+        MatchConfig {
+            location_weight,
+            dummy_cost,
+            ..MatchConfig::default()
+        }
+        .validate()?;
+        let indices = counts(indices, "indices")?;
+        if let Some(&bad) = indices.iter().find(|&&i| i >= self.inner.len()) {
+            return Err(invalid("indices", format!("{bad} is not a template")));
+        }
         let d = depth_array(depth, "depth")?;
         let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
-        if let Some(&bad) = indices.iter().find(|&&i| i >= self.inner.len()) {
-            return Err(Error::invalid("indices", format!("{bad} is not a template")).into());
-        }
+        check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
         let r = native(py, || -> crate::Result<Vec<f64>> {
             use rayon::prelude::*;
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
             let dc = &self.inner.config.descriptor;
             let sil = crate::descriptor::Silhouette::from_depth(
                 &view,
-                &camera.inner,
+                &cam,
                 m.as_deref(),
                 dc.normal_radius,
             )?;
@@ -444,73 +502,90 @@ impl PyTemplateDatabase {
         let d = PyDict::new(py);
         d.set_item("format_version", a.format_version)?;
         d.set_item("hash", format!("{:016x}", a.hash))?;
-        d.set_item("shape", to_numpy(py, a.shape, &[NUM_SHAPE_PARAMS]))?;
+        d.set_item("shape", to_numpy(py, a.shape, &[NUM_SHAPE_PARAMS])?)?;
         let nc = a.config.len();
-        d.set_item("config", to_numpy(py, a.config, &[nc]))?;
-        d.set_item("poses", to_numpy(py, a.poses, &[t, NUM_PARAMS]))?;
-        d.set_item("views", to_numpy(py, a.views, &[t]))?;
-        d.set_item("joints", to_numpy(py, a.joints, &[t, NUM_JOINTS, 3]))?;
-        d.set_item("centroids", to_numpy(py, a.centroids, &[t, 3]))?;
-        d.set_item("sizes", to_numpy(py, a.sizes, &[t]))?;
-        d.set_item("counts", to_numpy(py, a.counts, &[t]))?;
-        d.set_item("context_scale", to_numpy(py, a.context_scale, &[t]))?;
+        d.set_item("config", to_numpy(py, a.config, &[nc])?)?;
+        d.set_item("poses", to_numpy(py, a.poses, &[t, NUM_PARAMS])?)?;
+        d.set_item("views", to_numpy(py, a.views, &[t])?)?;
+        d.set_item("joints", to_numpy(py, a.joints, &[t, NUM_JOINTS, 3])?)?;
+        d.set_item("centroids", to_numpy(py, a.centroids, &[t, 3])?)?;
+        d.set_item("sizes", to_numpy(py, a.sizes, &[t])?)?;
+        d.set_item("counts", to_numpy(py, a.counts, &[t])?)?;
+        d.set_item("context_scale", to_numpy(py, a.context_scale, &[t])?)?;
         d.set_item(
             "context_centroid",
-            to_numpy(py, a.context_centroid, &[t, 2]),
+            to_numpy(py, a.context_centroid, &[t, 2])?,
         )?;
-        d.set_item("context_points", to_numpy(py, a.context_points, &[t]))?;
-        d.set_item("sample_pixels", to_numpy(py, a.sample_pixels, &[s, 2]))?;
+        d.set_item("context_points", to_numpy(py, a.context_points, &[t])?)?;
+        d.set_item("sample_pixels", to_numpy(py, a.sample_pixels, &[s, 2])?)?;
         d.set_item(
             "sample_positions",
-            to_numpy(py, a.sample_positions, &[s, 2]),
+            to_numpy(py, a.sample_positions, &[s, 2])?,
         )?;
-        d.set_item("descriptors", to_numpy(py, a.descriptors, &[s, dim]))?;
+        d.set_item("descriptors", to_numpy(py, a.descriptors, &[s, dim])?)?;
         Ok(d)
     }
 
     /// A database from `to_arrays` output; `source` names the file in errors. With
     /// `model_shape`/`config` given, refuses a database built for another model or
-    /// other settings (FileFormatError).
+    /// other settings (FileFormatError). Every entry must be a numpy array (or, for
+    /// `format_version` and `hash`, an integer and a hex string): anything else is a
+    /// FileFormatError naming the entry.
     #[staticmethod]
     #[pyo3(signature = (arrays, source, model_shape=None, config=None))]
     fn from_arrays(
         py: Python<'_>,
-        arrays: &Bound<PyDict>,
-        source: &str,
+        arrays: &Bound<PyAny>,
+        source: Text,
         model_shape: Option<&Bound<PyAny>>,
         config: Option<&Bound<PyAny>>,
     ) -> PyResult<Self> {
-        let file_err = |msg: String| -> PyErr { Error::file(source, msg).into() };
+        let source = source.get("source")?.to_string();
+        let arrays = arrays.cast::<PyDict>().map_err(|_| {
+            wrong_type(
+                "arrays",
+                "a dict of numpy arrays",
+                &arrays
+                    .get_type()
+                    .name()
+                    .map(|n| n.to_string())
+                    .unwrap_or_default(),
+            )
+        })?;
+        let file_err = |msg: String| -> PyErr { crate::Error::file(&source, msg).into() };
         let get = |k: &str| -> PyResult<Bound<PyAny>> {
             arrays
                 .get_item(k)?
                 .ok_or_else(|| file_err(format!("missing entry {k:?}")))
         };
+        // An entry that is not what the format says is the file's fault: its message
+        // (without the exception's class) goes into a FileFormatError.
+        let entry = |e: PyErr| file_err(e.value(py).to_string());
         let f64s = |k: &str| -> PyResult<Vec<f64>> {
-            Ok(f64_array(&get(k)?, k, None, true)
-                .map_err(|e| file_err(e.to_string()))?
-                .data)
+            Ok(f64_array(&get(k)?, k, None, true).map_err(entry)?.data)
         };
         let f32s = |k: &str| -> PyResult<Vec<f32>> {
-            Ok(f32_array(&get(k)?, k, None, true)
-                .map_err(|e| file_err(e.to_string()))?
-                .data)
+            Ok(f32_array(&get(k)?, k, None, true).map_err(entry)?.data)
         };
         let i64s = |k: &str| -> PyResult<Vec<i64>> {
-            Ok(i64_array(&get(k)?, k, None)
-                .map_err(|e| file_err(e.to_string()))?
-                .data)
+            Ok(i64_array(&get(k)?, k, None).map_err(entry)?.data)
         };
-        let version: u32 = get("format_version")?
-            .extract()
-            .map_err(|_| file_err("format_version is not an integer".into()))?;
+        let version = get("format_version")?
+            .extract::<Int>()
+            .map_err(|_| file_err("format_version is not an integer".into()))?
+            .in_range(0, i128::from(u32::MAX), "format_version")
+            .map_err(entry)?;
         let hash_s: String = get("hash")?
             .extract()
             .map_err(|_| file_err("hash is not a string".into()))?;
-        let hash = u64::from_str_radix(&hash_s, 16)
-            .map_err(|_| file_err(format!("hash {hash_s:?} is not hexadecimal")))?;
+        let hash = u64::from_str_radix(&hash_s, 16).map_err(|_| {
+            file_err(format!(
+                "hash {:?} is not hexadecimal",
+                hash_s.chars().take(40).collect::<String>()
+            ))
+        })?;
         let a = TemplateArrays {
-            format_version: version,
+            format_version: version as u32,
             hash,
             shape: f64s("shape")?,
             config: f64s("config")?,
@@ -534,10 +609,10 @@ impl PyTemplateDatabase {
                 Some((model, cfg))
             }
             (None, None) => None,
-            _ => return Err(Error::invalid("model_shape/config", "give both or neither").into()),
+            _ => return Err(invalid("model_shape/config", "give both or neither")),
         };
         let db = native(py, || {
-            TemplateDatabase::from_arrays(&a, expected.as_ref().map(|(m, c)| (m, c)), source)
+            TemplateDatabase::from_arrays(&a, expected.as_ref().map(|(m, c)| (m, c)), &source)
         })?;
         Ok(PyTemplateDatabase {
             inner: std::sync::Arc::new(db),
@@ -546,25 +621,27 @@ impl PyTemplateDatabase {
 
     /// The settings hash this database's model and settings give (hex).
     #[staticmethod]
-    #[pyo3(signature = (model_shape=None, *, width=96, height=96, distance=3.0, field_height=2.4,
-                        renderer="superquadric", samples=100, radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0))]
+    #[pyo3(signature = (model_shape=None, *, width=Int::new(96), height=Int::new(96),
+                        distance=Real::new(3.0), field_height=Real::new(2.4), renderer=None,
+                        samples=Int::new(100), radial_bins=Int::new(5), angular_bins=Int::new(12),
+                        seed=Int::new(0), depth_weight=Real::new(0.0)))]
     #[allow(clippy::too_many_arguments)]
     fn settings(
         py: Python<'_>,
         model_shape: Option<&Bound<PyAny>>,
-        width: i128,
-        height: i128,
-        distance: f64,
-        field_height: f64,
-        renderer: &str,
-        samples: i128,
-        radial_bins: i128,
-        angular_bins: i128,
-        seed: i128,
-        depth_weight: f64,
+        width: Int,
+        height: Int,
+        distance: Real,
+        field_height: Real,
+        renderer: Option<Text>,
+        samples: Int,
+        radial_bins: Int,
+        angular_bins: Int,
+        seed: Int,
+        depth_weight: Real,
     ) -> PyResult<(String, Py<PyAny>)> {
         let model = model_of(model_shape)?;
-        let cfg = config_of(
+        let cfg = Settings {
             width,
             height,
             distance,
@@ -575,12 +652,13 @@ impl PyTemplateDatabase {
             angular_bins,
             seed,
             depth_weight,
-        )?;
+        }
+        .config()?;
         let v = crate::templates::config_to_vec(&cfg).to_vec();
         let n = v.len();
         Ok((
             format!("{:016x}", TemplateDatabase::settings_hash(&model, &cfg)),
-            to_numpy(py, v, &[n]).into_any().unbind(),
+            to_numpy(py, v, &[n])?.into_any().unbind(),
         ))
     }
 
@@ -590,7 +668,7 @@ impl PyTemplateDatabase {
     }
 
     #[getter]
-    fn model_shape<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<f64>> {
+    fn model_shape<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         to_numpy(
             py,
             self.inner.model.shape.to_vec().to_vec(),
@@ -600,14 +678,14 @@ impl PyTemplateDatabase {
 
     /// Template poses (768, 22) as rendered.
     #[getter]
-    fn poses<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<f64>> {
+    fn poses<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let v: Vec<f64> = self.inner.templates.iter().flat_map(|t| t.pose).collect();
         to_numpy(py, v, &[self.inner.len(), NUM_PARAMS])
     }
 
     /// Template joints (768, 15, 3), template camera frame.
     #[getter]
-    fn joints<'py>(&self, py: Python<'py>) -> Bound<'py, PyArrayDyn<f64>> {
+    fn joints<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
         let v: Vec<f64> = self
             .inner
             .templates
@@ -638,7 +716,7 @@ impl PyTemplateDatabase {
 
 /// Shape parameters (27,) of the default body model.
 #[pyfunction]
-fn _default_model_shape(py: Python<'_>) -> Bound<'_, PyArrayDyn<f64>> {
+fn _default_model_shape(py: Python<'_>) -> PyResult<Bound<'_, PyArrayDyn<f64>>> {
     to_numpy(
         py,
         BodyModel::default().shape.to_vec().to_vec(),
