@@ -23,9 +23,12 @@
 //! unary term, so the energy trace stays non-increasing across the schedule too. The
 //! full energy is evaluated after every step and a step that would raise it is undone.
 
-use super::free_space::{FreeSpaceCost, FreeSpaceImage, FreeSpaceTerm};
-use super::lm::{LevenbergMarquardt, LmConfig, LmReport, PoseObjective, PosePrior, WithPrior};
-use super::objective::{Loss, PointCost, PointObjective, CHUNK_POINTS};
+use super::lm::{LevenbergMarquardt, LmConfig, LmReport};
+use super::system::PoseObjective;
+use super::terms::data::{PointObjective, CHUNK_POINTS};
+use super::terms::free_space::{FreeSpaceCost, FreeSpaceImage, FreeSpaceTerm};
+use super::terms::{Loss, PointCost};
+use super::terms::{PosePrior, WithPrior};
 use crate::body::residuals::{to_f64, PoseGeometry};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::cloud::PixelGraph;

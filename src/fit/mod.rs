@@ -6,29 +6,34 @@
 //! joints, per-pixel part labels and diagnostics.
 
 pub mod em;
-pub mod free_space;
 pub mod ik;
 pub mod lm;
-pub mod objective;
 pub mod shape;
 pub mod start;
+pub mod system;
+pub mod terms;
+
+/// The data term ([`terms::data`]).
+pub use terms::data as objective;
+pub use terms::free_space;
 
 use crate::body::{pose_from_slice, BodyModel, Pose, NUM_JOINTS, NUM_SEGMENTS};
 use crate::camera::Camera;
 use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView, PixelGraph};
 use crate::error::{Error, Result};
-use free_space::{FreeSpaceImage, FreeSpaceTerm};
 use nalgebra::Vector3;
 use rayon::prelude::*;
+use terms::free_space::{FreeSpaceImage, FreeSpaceTerm};
 
 pub use em::{
     hard_em, hard_em_from, label_points, EmConfig, EmResult, EmResume, EmTermination, PointLabels,
     OUTLIER,
 };
 pub use ik::pose_from_joints;
-pub use lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, Termination};
-pub use objective::Loss;
+pub use lm::{LevenbergMarquardt, LmConfig, LmReport, Termination};
 pub use shape::{fit_shape, shape_lm, ShapeConfig, ShapeFrame, ShapeResult};
+pub use terms::Loss;
+pub use terms::PosePrior;
 
 /// Fewer foreground points than this cannot constrain 22 parameters.
 pub const MIN_POINTS: usize = 50;

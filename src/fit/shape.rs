@@ -40,7 +40,7 @@ use super::em::{crf_energy, edge_weights, hard_em, unary_costs, EmConfig, NUM_LA
 use super::lm::pose_after_step;
 /// Why [`shape_lm`] stopped (same meanings as [`super::Termination`]).
 pub use super::lm::Termination as ShapeTermination;
-use super::objective::PointCost;
+use super::terms::PointCost;
 use super::{FitConfig, MIN_POINTS};
 use crate::body::kinematics::SEGMENT_DOFS;
 use crate::body::{
@@ -755,7 +755,7 @@ pub fn fit_shape(
 mod tests {
     use super::*;
     use crate::body::{param, BodyShape, NUM_SHAPE_PARAMS, SHAPE_FACTOR_GROUPS};
-    use crate::fit::objective::Loss;
+    use crate::fit::terms::Loss;
     use crate::fit::tests::perturbed;
 
     /// Small deterministic generator in [−1, 1).

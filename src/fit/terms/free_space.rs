@@ -27,11 +27,10 @@
 //! energy counts this term, and the E-step does not change it, so the EM energy still
 //! never increases either.
 
-use super::lm::{N, NN};
-use super::objective::{accumulate_row, add_segment_moments, mirror_upper, SYM6};
 use crate::body::residuals::PoseGeometry;
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::camera::Camera;
+use crate::fit::system::{accumulate_row, add_segment_moments, mirror_upper, N, NN, SYM6};
 use std::sync::Mutex;
 
 /// Surface samples per segment.
@@ -353,8 +352,10 @@ mod tests {
     /// have weighted residuals.
     #[test]
     fn the_term_beside_the_data_term_adds_up_as_one_after_the_other() {
-        use crate::fit::lm::{PoseObjective, PosePrior, WithPrior};
-        use crate::fit::objective::{Loss, PointCost, PointObjective};
+        use crate::fit::system::PoseObjective;
+        use crate::fit::terms::data::PointObjective;
+        use crate::fit::terms::{Loss, PointCost};
+        use crate::fit::terms::{PosePrior, WithPrior};
         let model = BodyModel::default();
         let cam = camera();
         let pose = pose_for_tests(5);
@@ -407,8 +408,10 @@ mod tests {
     /// by moving the body back, never raising the cost on the way.
     #[test]
     fn surface_in_front_of_the_readings_is_pushed_behind_them() {
-        use crate::fit::lm::{LevenbergMarquardt, LmConfig, WithPrior};
-        use crate::fit::objective::{Loss, PointCost, PointObjective};
+        use crate::fit::lm::{LevenbergMarquardt, LmConfig};
+        use crate::fit::terms::data::PointObjective;
+        use crate::fit::terms::WithPrior;
+        use crate::fit::terms::{Loss, PointCost};
         let model = BodyModel::default();
         let cam = camera();
         let mut pose = BodyModel::neutral_pose();
