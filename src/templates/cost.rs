@@ -2,6 +2,8 @@
 //! query and a template, and their assignment cost.
 
 #[cfg(target_arch = "x86_64")]
+use super::columns::QueryColumns;
+#[cfg(target_arch = "x86_64")]
 use super::cost_kernel::{cost_rows_avx512, cost_rows_fma};
 use crate::assignment::{assignment_with_outliers, AssignmentWorkspace};
 use crate::descriptor::SurfaceContext;
@@ -25,43 +27,6 @@ pub(super) fn pair_cost(
 #[inline]
 pub(super) fn planar_distance(a: [f32; 2], b: [f32; 2]) -> f32 {
     ((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1])).sqrt()
-}
-
-/// A query's descriptors and positions laid out for the exact stage's cost matrices:
-/// value `d` of sample `i` at `d · stride + i`, positions as two rows, every row
-/// zero-padded to `stride` (the sample count rounded up to 32), so that a vector
-/// holds one value of 8 (AVX2) or 16 (AVX-512) consecutive samples. Made once per
-/// query.
-pub struct QueryColumns {
-    pub(super) values: Vec<f32>,
-    pub(super) x: Vec<f32>,
-    pub(super) y: Vec<f32>,
-    pub(super) stride: usize,
-}
-
-impl QueryColumns {
-    pub fn new(q: &SurfaceContext) -> Self {
-        let (n, dim) = (q.len(), q.dim);
-        // A multiple of 32: the AVX-512 kernel reads two 16-lane vectors per block.
-        let stride = n.next_multiple_of(32);
-        let mut values = vec![0.0f32; dim * stride];
-        for i in 0..n {
-            for (d, &v) in q.descriptor(i).iter().enumerate() {
-                values[d * stride + i] = v;
-            }
-        }
-        let mut x = vec![0.0f32; stride];
-        let mut y = vec![0.0f32; stride];
-        for (i, p) in q.positions.iter().enumerate() {
-            (x[i], y[i]) = (p[0], p[1]);
-        }
-        QueryColumns {
-            values,
-            x,
-            y,
-            stride,
-        }
-    }
 }
 
 /// The `pair_cost` of every template sample (rows) with every query sample (columns),

@@ -1,6 +1,6 @@
 //! The SIMD kernels of the cost matrix ([`super::cost`]), one per vector width.
 
-use super::cost::QueryColumns;
+use super::columns::QueryColumns;
 use crate::descriptor::SurfaceContext;
 
 /// Writes a cost-rows kernel for one vector width: 4 template samples × 2 vectors of

@@ -2,17 +2,14 @@
 //! numbers.
 
 use super::catalogue::{NUM_TEMPLATES, NUM_VIEWS};
-use super::database::{Template, TemplateDatabase};
+use super::database::{TemplateDatabase, FORMAT_VERSION};
+use super::template::Template;
 use super::TemplateConfig;
 use super::TemplateRenderer;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{BodyModel, NUM_JOINTS, NUM_PARAMS};
 use crate::descriptor::{DescriptorConfig, SurfaceContext};
 use crate::error::{ensure, Result};
-
-/// Version of the template file format and of the template definition; bump when
-/// either changes so stale caches are rebuilt.
-pub const FORMAT_VERSION: u32 = 3;
 
 /// A database as flat arrays (what the Python layer stores in a file).
 #[derive(Debug, Clone, Default, PartialEq)]

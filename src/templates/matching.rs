@@ -3,10 +3,12 @@
 //! re-ranking by placed fit energy.
 
 use super::catalogue::NUM_TEMPLATES;
-use super::cost::{matching_cost_with, QueryColumns};
+use super::columns::QueryColumns;
+use super::cost::matching_cost_with;
 use super::database::TemplateDatabase;
 use super::prune::prune_sum;
 use super::prune::Representatives;
+use super::template::metric_size;
 use crate::assignment::AssignmentWorkspace;
 use crate::body::{param, Pose, NUM_JOINTS};
 use crate::camera::Camera;
@@ -15,14 +17,6 @@ use crate::descriptor::{Silhouette, SurfaceContext};
 use crate::error::{ensure, Result};
 use nalgebra::{Rotation3, Vector3};
 use rayon::prelude::*;
-
-pub(super) fn metric_size(
-    context: &SurfaceContext,
-    centroid: &Vector3<f64>,
-    camera: &Camera,
-) -> f64 {
-    context.scale * centroid.z / (camera.fx * camera.fy).sqrt()
-}
 
 /// Settings of [`TemplateDatabase::match_depth`].
 #[derive(Debug, Clone, Copy, PartialEq)]

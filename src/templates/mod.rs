@@ -17,6 +17,7 @@
 //! Both stages run in parallel over templates.
 
 mod catalogue;
+mod columns;
 mod cost;
 mod cost_kernel;
 mod database;
@@ -26,6 +27,7 @@ mod format;
 mod matching;
 mod prune;
 mod raster;
+mod template;
 #[cfg(test)]
 mod tests;
 
@@ -33,13 +35,13 @@ pub use catalogue::{
     template_code, template_pose, ARM_POSE_NAMES, LEG_POSE_NAMES, LIMB_POSES, NUM_TEMPLATES,
     NUM_VIEWS, VIEW_NAMES,
 };
-pub use cost::{matching_cost, QueryColumns};
-pub use database::{Template, TemplateDatabase};
-pub use format::{
-    config_from_vec, config_to_vec, TemplateArrays, CONFIG_VALUES, FORMAT_VERSION, MAX_SEED,
-};
+pub use columns::QueryColumns;
+pub use cost::matching_cost;
+pub use database::{TemplateDatabase, FORMAT_VERSION};
+pub use format::{config_from_vec, config_to_vec, TemplateArrays, CONFIG_VALUES, MAX_SEED};
 pub use matching::{Candidate, MatchConfig, MatchResult};
 pub use raster::{rasterize_meshes_into, render_template};
+pub use template::Template;
 
 use crate::body::superquadric::MeshConfig;
 use crate::camera::Camera;

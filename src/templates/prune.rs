@@ -2,7 +2,7 @@
 //! directions ([`PruneIndex`]), the representative query samples, and each template's
 //! pruning score.
 
-use super::database::Template;
+use super::template::Template;
 use crate::descriptor::SurfaceContext;
 use rayon::prelude::*;
 

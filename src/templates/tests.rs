@@ -1,5 +1,6 @@
 use super::catalogue::{template_code, template_pose, LIMB_POSES, NUM_TEMPLATES, NUM_VIEWS};
-use super::cost::{cost_matrix, pair_cost, QueryColumns};
+use super::columns::QueryColumns;
+use super::cost::{cost_matrix, pair_cost};
 #[cfg(target_arch = "x86_64")]
 use super::cost_kernel::{cost_rows_avx512, cost_rows_fma};
 use super::database::TemplateDatabase;

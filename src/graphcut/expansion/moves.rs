@@ -1,16 +1,29 @@
 //! The expansion moves of [`CrfSolver`]: one cycle over the labels, the candidate
 //! sets of the exact pruning, and the construction and solve of one move.
 
-use super::potts_candidate_mask;
+use super::problem::Cost;
+#[cfg(test)]
+use super::problem::CrfProblem;
 use super::problem::{Checked, Energy};
 use super::solver::{CrfSolver, ExpansionRun};
-use super::Cost;
-#[cfg(test)]
-use super::CrfProblem;
 use crate::graphcut::bitset::BitSet;
 use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
 // Node and label indices address several parallel arrays at once in these loops.
+/// The labels a node labelled `own`, with unary row `row` and sum of edge weights
+/// `slack`, may switch to in an expansion move on a Potts problem with nothing
+/// forbidden (bit per label): those whose unary exceeds its own by at most `slack`,
+/// the exact pruning test of the moves (`CrfSolver::expansion_move`).
+#[inline(always)]
+pub fn potts_candidate_mask<C: Cost>(row: &[C], own: usize, slack: C) -> u64 {
+    let base = row[own];
+    let mask = row
+        .iter()
+        .enumerate()
+        .fold(0u64, |m, (a, &u)| m | (((u - base <= slack) as u64) << a));
+    mask & !(1u64 << own)
+}
+
 #[allow(clippy::needless_range_loop)]
 impl<C: Cost> CrfSolver<C> {
     /// One cycle of expansion moves over every label; whether a move was accepted (then

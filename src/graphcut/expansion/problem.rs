@@ -1,11 +1,19 @@
 //! The CRF energy: cost types, the problem and the checks that resolve it into the
 //! form the moves read ([`Checked`]), and the energy of a labelling.
 
-use super::{DEFAULT_MAX_CYCLES, ENERGY_CHUNK, METRIC_RTOL, PARALLEL_MIN_NODES};
 use crate::error::{ensure, Error, Result};
 use crate::graphcut::maxflow::Capacity;
 use rayon::prelude::*;
 use std::cmp::Ordering;
+
+/// Default number of cycles over all labels (or label pairs).
+pub const DEFAULT_MAX_CYCLES: usize = 20;
+/// Below this many nodes, the energy is summed on one thread (rayon does not pay).
+const PARALLEL_MIN_NODES: usize = 65_536;
+/// Chunk size of the parallel energy sum (fixed, so float sums are deterministic).
+const ENERGY_CHUNK: usize = 16_384;
+/// Relative tolerance of the float triangle-inequality check on `pairwise`.
+const METRIC_RTOL: f64 = 1e-12;
 
 /// A cost type for the CRF: `f64` or `i64` (exact).
 pub trait Cost: Capacity {
@@ -502,4 +510,47 @@ impl<C: Cost> Checked<'_, C> {
             self.unary.par_chunks(l).map(pick).collect()
         }
     }
+}
+
+/// The energy of `labels` (with `unary` N×L etc. as in [`CrfProblem`]).
+/// Returns [`Cost::FORBIDDEN`] if a node has a forbidden label.
+pub fn energy<C: Cost>(problem: &CrfProblem<C>, labels: &[i32]) -> Result<C> {
+    let c = check_problem(problem, false, false, false)?;
+    ensure(labels.len() == c.n, "labels", || {
+        format!("length {} does not match {} nodes", labels.len(), c.n)
+    })?;
+    if let Some(i) = labels.iter().position(|&a| a < 0 || a as usize >= c.l) {
+        return Err(Error::invalid(
+            "labels",
+            format!("label {} at node {i} is not in 0..{}", labels[i], c.l),
+        ));
+    }
+    Ok(c.energy(labels).value())
+}
+
+/// The energy of `labels` under Potts costs (`pairwise` None), unchecked: the sum
+/// [`CrfSolver`] computes (same order, so the same bits), which lets a caller that
+/// tracks energies hand one to [`ExpansionHints::init_energy`] or compare it with a
+/// [`Labelling`]'s. Sizes and labels must be in range (panics otherwise); a forbidden
+/// label gives [`Cost::FORBIDDEN`].
+pub(crate) fn potts_energy<C: Cost>(
+    unary: &[C],
+    n_labels: usize,
+    edges: &[[u32; 2]],
+    weights: &[C],
+    labels: &[i32],
+) -> C {
+    let c = Checked {
+        n: labels.len(),
+        l: n_labels,
+        unary,
+        edges,
+        weights,
+        // Potts: `pair` reads neither; `energy` needs neither.
+        v: Vec::new(),
+        potts: true,
+        big: C::ZERO,
+        allowed_somewhere: Vec::new(),
+    };
+    c.energy(labels).value()
 }

@@ -2,7 +2,7 @@
 //! alpha-expansion.
 
 use super::problem::{check_problem, Checked, Energy};
-use super::{Cost, CrfProblem, Labelling, MoveConfig};
+use super::problem::{Cost, CrfProblem, Labelling, MoveConfig};
 use crate::error::{ensure, Error, Result};
 use crate::graphcut::bitset::BitSet;
 use crate::graphcut::maxflow::Graph;
@@ -367,4 +367,24 @@ impl<C: Cost> CrfSolver<C> {
         };
         Ok((labelling, beside_output))
     }
+}
+
+/// Alpha-expansion (metric `pairwise`), one shot. See [`CrfSolver`] to reuse storage.
+pub fn alpha_expansion<C: Cost>(
+    problem: &CrfProblem<C>,
+    init: Option<&[i32]>,
+    config: &MoveConfig,
+) -> Result<Labelling<C>> {
+    let n = problem.unary.len() / problem.n_labels.max(1);
+    CrfSolver::new(n, problem.edges)?.alpha_expansion(problem, init, config)
+}
+
+/// Alpha-beta swap (semi-metric `pairwise`), one shot.
+pub fn alpha_beta_swap<C: Cost>(
+    problem: &CrfProblem<C>,
+    init: Option<&[i32]>,
+    config: &MoveConfig,
+) -> Result<Labelling<C>> {
+    let n = problem.unary.len() / problem.n_labels.max(1);
+    CrfSolver::new(n, problem.edges)?.alpha_beta_swap(problem, init, config)
 }

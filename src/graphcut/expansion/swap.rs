@@ -1,7 +1,8 @@
 //! Alpha-beta swap moves of [`CrfSolver`].
 
 use super::problem::{Checked, Energy};
-use super::{Cost, CrfProblem, CrfSolver, Labelling, MoveConfig};
+use super::problem::{Cost, CrfProblem, Labelling, MoveConfig};
+use super::solver::CrfSolver;
 use crate::error::Result;
 
 // Node and label indices address several parallel arrays at once in these loops.

@@ -1,4 +1,6 @@
+use super::problem::check_problem;
 use super::*;
+use crate::error::Error;
 use proptest::prelude::*;
 
 #[derive(Clone, Debug)]
