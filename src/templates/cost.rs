@@ -80,30 +80,28 @@ pub fn matching_cost(
     assign: &mut Vec<Option<usize>>,
 ) -> f64 {
     let columns = QueryColumns::new(q);
-    matching_cost_with(
-        q,
-        &columns,
-        t,
-        location_weight,
-        dummy_cost,
-        ws,
-        cost,
-        assign,
-    )
+    let scratch = MatchScratch { ws, cost, assign };
+    matching_cost_with(q, &columns, t, (location_weight, dummy_cost), scratch)
 }
 
-/// [`matching_cost`] with the query's [`QueryColumns`] made already.
-#[allow(clippy::too_many_arguments)]
+/// The storage [`matching_cost_with`] reuses across templates: the assignment's
+/// workspace, the cost matrix and the assignment.
+pub(super) struct MatchScratch<'s> {
+    pub ws: &'s mut AssignmentWorkspace,
+    pub cost: &'s mut Vec<f64>,
+    pub assign: &'s mut Vec<Option<usize>>,
+}
+
+/// [`matching_cost`] with the query's [`QueryColumns`] made already (and the location
+/// weight and the dummy cost as a pair).
 pub(super) fn matching_cost_with(
     q: &SurfaceContext,
     columns: &QueryColumns,
     t: &SurfaceContext,
-    location_weight: f64,
-    dummy_cost: f64,
-    ws: &mut AssignmentWorkspace,
-    cost: &mut Vec<f64>,
-    assign: &mut Vec<Option<usize>>,
+    (location_weight, dummy_cost): (f64, f64),
+    scratch: MatchScratch<'_>,
 ) -> f64 {
+    let MatchScratch { ws, cost, assign } = scratch;
     let (n, m) = (q.len(), t.len());
     cost_matrix(q, columns, t, location_weight as f32, cost);
     // Template samples as rows: the optimal total is the same either way round.

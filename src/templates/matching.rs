@@ -4,7 +4,7 @@
 
 use super::catalogue::NUM_TEMPLATES;
 use super::columns::QueryColumns;
-use super::cost::matching_cost_with;
+use super::cost::{matching_cost_with, MatchScratch};
 use super::database::TemplateDatabase;
 use super::prune::prune_sum;
 use super::prune::Representatives;
@@ -237,16 +237,10 @@ impl TemplateDatabase {
             .map_init(
                 || (AssignmentWorkspace::default(), Vec::new(), Vec::new()),
                 |(ws, cost, assign), &t| {
-                    let c = matching_cost_with(
-                        query,
-                        &columns,
-                        &self.templates[t].context,
-                        config.location_weight,
-                        config.dummy_cost,
-                        ws,
-                        cost,
-                        assign,
-                    );
+                    let weights = (config.location_weight, config.dummy_cost);
+                    let scratch = MatchScratch { ws, cost, assign };
+                    let tpl = &self.templates[t].context;
+                    let c = matching_cost_with(query, &columns, tpl, weights, scratch);
                     (c, t)
                 },
             )
