@@ -203,46 +203,54 @@ struct PointGroups {
 }
 
 impl PointGroups {
-    /// One group of the `n` points in order.
-    fn all(n: usize) -> Self {
-        let mut start = [0; NUM_LABELS + 1];
-        start[1] = n;
+    /// No points yet.
+    #[inline(always)]
+    fn new() -> Self {
         PointGroups {
-            order: std::array::from_fn(|j| j as u16),
-            n,
-            start,
-            groups: 1,
+            order: [0; CHUNK_POINTS],
+            n: 0,
+            start: [0; NUM_LABELS + 1],
+            groups: 0,
         }
     }
 
+    /// One group of the `n` points in order.
+    #[inline(always)]
+    fn set_all(&mut self, n: usize) {
+        for (j, o) in self.order.iter_mut().enumerate() {
+            *o = j as u16;
+        }
+        self.n = n;
+        self.start[1] = n;
+        self.groups = 1;
+    }
+
     /// The points by label (counting sort), each segment's in ascending order.
-    fn by_label(labels: &[i32]) -> Self {
-        let mut start = [0usize; NUM_LABELS + 1];
+    #[inline(always)]
+    fn set_by_label(&mut self, labels: &[i32]) {
+        let start = &mut self.start;
         for &l in labels {
             start[l.clamp(0, OUTLIER) as usize + 1] += 1;
         }
         for k in 0..NUM_LABELS {
             start[k + 1] += start[k];
         }
-        let mut by_label = [0u16; CHUNK_POINTS];
-        let mut next = start;
+        let mut next = *start;
         for (i, &l) in labels.iter().enumerate() {
             let k = l.clamp(0, OUTLIER) as usize;
-            by_label[next[k]] = i as u16;
+            self.order[next[k]] = i as u16;
             next[k] += 1;
         }
-        PointGroups {
-            order: by_label,
-            n: labels.len(),
-            start,
-            groups: NUM_LABELS,
-        }
+        self.n = labels.len();
+        self.groups = NUM_LABELS;
     }
 
+    #[inline(always)]
     fn order(&self) -> &[u16] {
         &self.order[..self.n]
     }
 
+    #[inline(always)]
     fn range(&self, g: usize) -> std::ops::Range<usize> {
         self.start[g]..self.start[g + 1]
     }
@@ -260,16 +268,29 @@ struct GroupedPoints {
 impl GroupedPoints {
     /// Smaller blocks (of 32 points within a label) culled no more on the bench frame:
     /// its segments' bounding spheres are loose.
-    fn new(groups: &PointGroups, buf: &[[f64; 3]], reach: &[f64; CHUNK_POINTS]) -> Self {
+    #[inline(always)]
+    fn new() -> Self {
+        GroupedPoints {
+            soa: [[0.0f64; CHUNK_POINTS]; 3],
+            boxes: [([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]); NUM_LABELS],
+            reach: [f64::INFINITY; NUM_LABELS],
+        }
+    }
+
+    /// The points of `groups` (coordinates in `buf`, reaches in `reach`).
+    #[inline(always)]
+    fn fill(&mut self, groups: &PointGroups, buf: &[[f64; 3]], reach: &[f64; CHUNK_POINTS]) {
         let order = groups.order();
-        let mut soa = [[0.0f64; CHUNK_POINTS]; 3];
+        let GroupedPoints {
+            soa,
+            boxes,
+            reach: group_reach,
+        } = self;
         for (j, &i) in order.iter().enumerate() {
             for r in 0..3 {
                 soa[r][j] = buf[i as usize][r];
             }
         }
-        let mut boxes = [([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]); NUM_LABELS];
-        let mut group_reach = [f64::INFINITY; NUM_LABELS];
         for g in 0..groups.groups {
             let (lo, hi) = &mut boxes[g];
             let mut most = f64::NEG_INFINITY;
@@ -281,11 +302,6 @@ impl GroupedPoints {
                 most = most.max(reach[order[j] as usize]);
             }
             group_reach[g] = most;
-        }
-        GroupedPoints {
-            soa,
-            boxes,
-            reach: group_reach,
         }
     }
 }
@@ -312,10 +328,11 @@ fn unary_chunk(
         row[..NUM_SEGMENTS].fill(cap);
         row[NUM_SEGMENTS] = costs.outlier;
     }
-    let (groups, skipped, candidates) = match held {
+    let mut groups = PointGroups::new();
+    let (skipped, candidates) = match held {
         Some(held) => {
             held.skipped.fill(0);
-            let groups = own_label_terms(costs, u, buf, &held, &mut reach);
+            own_label_terms(costs, u, buf, &held, (&mut groups, &mut reach));
             let ChunkHeld {
                 labels,
                 slack,
@@ -323,11 +340,15 @@ fn unary_chunk(
                 candidate_words,
                 ..
             } = held;
-            (groups, skipped, candidate_words.map(|w| (labels, slack, w)))
+            (skipped, candidate_words.map(|w| (labels, slack, w)))
         }
-        None => (PointGroups::all(pts.len()), &mut [][..], None),
+        None => {
+            groups.set_all(pts.len());
+            (&mut [][..], None)
+        }
     };
-    let grouped = GroupedPoints::new(&groups, buf, &reach);
+    let mut grouped = GroupedPoints::new();
+    grouped.fill(&groups, buf, &reach);
     segment_terms(costs, u, &groups, &grouped, &reach, skipped);
     if let Some((labels, slack, words)) = candidates {
         fill_candidate_words(u, labels, slack, words);
@@ -336,14 +357,15 @@ fn unary_chunk(
 
 /// With held labels: each point's exact term for its own label, and its reach (the
 /// most another label may cost and still be within the expansion's reach, as the
-/// residual of that cost). Returns the points grouped by label.
+/// residual of that cost); the points grouped by label into `groups`.
+#[inline(always)]
 fn own_label_terms(
     costs: &ChunkCosts<'_>,
     u: &mut [f64],
     buf: &[[f64; 3]],
     held: &ChunkHeld<'_>,
-    reach: &mut [f64; CHUNK_POINTS],
-) -> PointGroups {
+    (groups, reach): (&mut PointGroups, &mut [f64; CHUNK_POINTS]),
+) {
     let ChunkCosts { geo, pc, outlier } = *costs;
     let (labels, slack) = (held.labels, held.slack);
     for (i, &l) in labels.iter().enumerate() {
@@ -351,7 +373,7 @@ fn own_label_terms(
             reach[i] = outlier + slack[i];
         }
     }
-    let groups = PointGroups::by_label(labels);
+    groups.set_by_label(labels);
     for (k, e) in geo.segments.iter().enumerate() {
         let mine = &groups.order[groups.range(k)];
         let mut own_cost = |i: usize, d: f64| {
@@ -378,13 +400,13 @@ fn own_label_terms(
         // rounding, far inside the margin).
         *r = pc.residual_within(*r);
     }
-    groups
 }
 
 /// Every segment's terms of the points near enough to need its exact distance. A
 /// group clear of the segment keeps the cap; with held labels (`skipped` not empty) a
 /// group or point whose distance certainly passes its reach is left out and marked in
 /// `skipped`.
+#[inline(always)]
 fn segment_terms(
     costs: &ChunkCosts<'_>,
     u: &mut [f64],
