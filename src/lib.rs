@@ -44,6 +44,7 @@ pub mod graphcut;
 pub mod io;
 pub mod pool;
 pub mod render;
+mod simd;
 pub mod stereo;
 pub mod templates;
 mod union_find;
