@@ -144,7 +144,7 @@ fn bench(c: &mut Criterion) {
     }
     // Parts of one EM iteration. The terms are computed once here too: the E-step
     // benches below take them as input, also when a filter skips `unary_costs` (they
-    // were all zero then, and `e_step_expansion_warm` read 90 ms instead of 0.5 ms).
+    // would all be zero, and the expansion would start from a different problem).
     let mut unary = vec![0.0; cloud.len() * NUM_LABELS];
     unary_costs(&model, &cloud.points, &truth, &cfg, 0.1, &mut unary);
     g.bench_function("unary_costs", |b| {

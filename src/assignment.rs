@@ -9,9 +9,8 @@
 //! row. The whole solve is O(n²·m) for n ≤ m rows. Outliers are handled by
 //! [`assignment_with_outliers`]: every item may stay unmatched at a fixed dummy cost.
 //!
-//! Jonker and Volgenant's column reduction and augmenting row reduction, tried as a
-//! start (sessions 8 and 12), made the matcher's solves slower, not faster, once the
-//! scan vectorised.
+//! Jonker and Volgenant's column reduction and augmenting row reduction are not used:
+//! with the vectorised scan they make the matcher's solves slower, not faster.
 
 use crate::error::{ensure, Result};
 

@@ -138,7 +138,7 @@ impl Cloud {
 /// Makes `v` hold `n` elements whose values the caller overwrites. A buffer that must
 /// grow is replaced by a zeroed allocation (`vec!` of a zero value gets pages the kernel
 /// has already zeroed) instead of being filled element by element on one thread: for a
-/// fresh 640×480 frame that serial first touch of ~30 MB cost more than the work itself.
+/// fresh 640×480 frame that serial first touch of ~30 MB costs more than the work itself.
 pub(super) fn set_len<T: Clone>(v: &mut Vec<T>, n: usize, zero: T) {
     if v.capacity() < n {
         *v = vec![zero; n];

@@ -509,8 +509,8 @@ fn similarity_value(similarity: Similarity, cov: f32, vl: f32, vr: f32) -> f32 {
 /// Each row has its own four-lane accumulator, and the rows are summed in order
 /// afterwards: the same multiplications and additions in the same order as a scalar loop,
 /// so the result is bit-identical to it. Explicit SSE (the x86-64 baseline) because the
-/// compiler, seeing lane 3 unused, split the lanes into a pair and a scalar and more than
-/// doubled the instructions.
+/// compiler, seeing lane 3 unused, splits the lanes into a pair and a scalar and more
+/// than doubles the instructions.
 ///
 /// # Safety
 /// `left` must be readable for rows j < SIDE of SIDE pixels at `left + j·w`, and `right`

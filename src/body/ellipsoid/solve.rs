@@ -5,10 +5,9 @@
 /// Newton/bisection stops when the step is below this relative size. Newton converges
 /// quadratically, so the iterate after a step δ is off by about K·δ² (K = |H''/2H'|,
 /// order one for the normalised H): with δ ≤ 1e-6 that is ~1e-12 relative, at the
-/// level of rounding in the distance (against a 3000-step bisection reference on random
-/// ellipsoids and points: distance and closest point within 1.1e-12 m, as with 1e-9),
-/// and it saves the extra iteration a 1e-9 tolerance spends confirming it. (Asking
-/// for steps of a few ulps makes the iteration chase rounding noise in H.)
+/// level of rounding in the distance (the tests compare with a bisection reference run
+/// to the last bit), without the extra iteration a 1e-9 tolerance spends confirming
+/// it. (Asking for steps of a few ulps makes the iteration chase rounding noise in H.)
 pub(super) const ROOT_TOLERANCE: f64 = 1e-6;
 /// |H| below this is a root to rounding precision.
 pub(super) const H_TOLERANCE: f64 = 4.0 * f64::EPSILON;

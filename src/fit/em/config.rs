@@ -80,7 +80,8 @@ impl Default for EmConfig {
             free_space_truncation: 0.05,
             lm: LmConfig {
                 // The EM loop re-linearises after every E-step anyway; a few LM
-                // iterations per M-step fit the shared sequences better and faster.
+                // iterations per M-step fit the shared sequences better and faster than
+                // a full solve (docs/fit.md).
                 max_iterations: 3,
                 cost_tolerance: 1e-5,
                 ..LmConfig::default()
@@ -165,7 +166,9 @@ impl EmConfig {
     }
 
     /// Whether iteration `it`'s E-step (0: the initial one) has the final τ in a run
-    /// whose annealing was cut after iteration `cut` ([`EmResult::anneal_cut`](super::EmResult::anneal_cut)).
+    /// whose annealing was cut after iteration `cut` ([`EmResult::anneal_cut`]).
+    ///
+    /// [`EmResult::anneal_cut`]: super::EmResult::anneal_cut
     pub fn annealed_in(&self, it: usize, cut: Option<usize>) -> bool {
         it >= self.anneal_iterations || cut.is_some_and(|k| k < it)
     }

@@ -144,7 +144,7 @@ impl<'g> EStep<'g> {
     /// exact value alike, a candidate for the expansion from the cheapest labels: both
     /// come out as with every term exact, and the terms stay as exact as every later
     /// E-step's (see [`unary_costs_for_labels`]). (Holding every point at the outlier
-    /// label, whose cost needs no distance, left out fewer: its reach is ≈ τ.)
+    /// label, whose cost needs no distance, would leave out fewer: its reach is ≈ τ.)
     pub fn at_pose(
         graph: &'g PixelGraph,
         inputs: EmInputs<'g>,
@@ -333,8 +333,10 @@ impl<'g> EStep<'g> {
 
 /// One E-step on its own: the CRF labels of `points` for a fixed `pose` at outlier
 /// distance `tau`, by alpha-expansion from `init` (labels in `0..NUM_LABELS`, the outlier
-/// label being [`NUM_SEGMENTS`](crate::body::NUM_SEGMENTS)). Returns the labels and the CRF energy. Used to label
+/// label being [`NUM_SEGMENTS`]). Returns the labels and the CRF energy. Used to label
 /// the full-resolution cloud after EM ran on a sub-sampled one.
+///
+/// [`NUM_SEGMENTS`]: crate::body::NUM_SEGMENTS
 pub fn label_points(
     model: &BodyModel,
     points: &[[f32; 3]],

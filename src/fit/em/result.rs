@@ -37,8 +37,10 @@ pub struct EmResult {
     pub iterations: usize,
     pub termination: EmTermination,
     /// Some(k): the fit had settled at iteration k while τ was still annealing, and τ
-    /// took its final value from iteration k + 1 on ([`EmConfig::adaptive_anneal`](super::EmConfig::adaptive_anneal); a
+    /// took its final value from iteration k + 1 on ([`EmConfig::adaptive_anneal`]; a
     /// resumed run continues so).
+    ///
+    /// [`EmConfig::adaptive_anneal`]: super::EmConfig::adaptive_anneal
     pub anneal_cut: Option<usize>,
     /// Points per segment.
     pub part_counts: [usize; NUM_SEGMENTS],
@@ -46,9 +48,12 @@ pub struct EmResult {
     pub outliers: usize,
 }
 
-/// An EM run to continue (see [`hard_em_from`](super::hard_em_from)): the per-point labels it ended with
-/// (segment 0..15 or [`OUTLIER`](super::OUTLIER)), the iterations it ran and where its annealing was
+/// An EM run to continue (see [`hard_em_from`]): the per-point labels it ended with
+/// (segment 0..15 or [`OUTLIER`]), the iterations it ran and where its annealing was
 /// cut ([`EmResult::anneal_cut`]).
+///
+/// [`hard_em_from`]: super::hard_em_from
+/// [`OUTLIER`]: super::OUTLIER
 #[derive(Debug, Clone, Copy)]
 pub struct EmResume<'a> {
     pub labels: &'a [i32],

@@ -266,8 +266,8 @@ struct GroupedPoints {
 }
 
 impl GroupedPoints {
-    /// Smaller blocks (of 32 points within a label) culled no more on the bench frame:
-    /// its segments' bounding spheres are loose.
+    /// One box per group: smaller blocks (of 32 points within a label) cull no more,
+    /// the segments' bounding spheres being loose.
     #[inline(always)]
     fn new() -> Self {
         GroupedPoints {
@@ -478,7 +478,7 @@ fn segment_terms(
             // Also the points whose cost is certainly beyond reach: whose distance's
             // lower bound passes the reach as a residual (no square root, no division).
             // Branch-free: which points pass is data-dependent, and a branch per point
-            // was mispredicted often enough to show in profiles.
+            // would be mispredicted often.
             let mut kept = 0;
             for q in 0..m {
                 let j = near[q] as usize;
@@ -516,8 +516,8 @@ pub(super) fn fill_candidate_words(u: &[f64], labels: &[i32], slack: &[f64], wor
 }
 
 /// A cheap guess of each point's segment at `pose`: the one whose centre is nearest in
-/// units of its largest half-axis (on the bench frame this left out more terms than the
-/// nearest bounding sphere did).
+/// units of its largest half-axis (a tighter guess than the nearest bounding sphere, so
+/// more terms are left out).
 pub(super) fn nearest_segment_guess(
     model: &BodyModel,
     points: &[[f32; 3]],

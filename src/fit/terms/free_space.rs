@@ -17,8 +17,9 @@
 //! without a reading (0 or NaN) and samples outside the image add nothing: their space
 //! is unknown. (Comparing with the nearest reading within 1 or 2 pixels instead, which
 //! spares a sample on a segment's outline that projects onto the part behind it, fitted
-//! the shared sequences worse: docs/fit.md.) The background must be in the depth image for the silhouette to count
-//! (the fit's mask selects the person's points; the term reads every pixel).
+//! the shared sequences worse: docs/fit.md.) The background must be in the depth image
+//! for the silhouette to count (the fit's mask selects the person's points; the term
+//! reads every pixel).
 //!
 //! The residual's gradient with respect to the sample's camera-frame position is taken
 //! as (0, 0, −1): the reading D is held constant over the step (it is piecewise constant
@@ -439,8 +440,7 @@ mod tests {
         let mut lm = LevenbergMarquardt::new(LmConfig {
             max_iterations: 100,
             // Stop at zero cost, not at a step of 1e-7 (the default), which can leave
-            // a sample a micrometre or two in front depending on the path (an LM
-            // variant tried in session 30 stopped there with one at 1.5 µm).
+            // a sample a micrometre or two in front depending on the path.
             step_tolerance: 1e-10,
             ..LmConfig::default()
         })

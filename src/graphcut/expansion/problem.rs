@@ -35,8 +35,8 @@ impl Cost for f64 {
     const FORBIDDEN: Self = f64::INFINITY;
     fn all_plain(values: &[f64]) -> bool {
         // x · 0 is ±0 for a finite x and NaN for ±inf or NaN (so for the forbidden
-        // +inf too). Sums in eight lanes vectorise, where the fold of comparisons ran
-        // one value at a time (most of an E-step's checks).
+        // +inf too). Sums in eight lanes vectorise, where a fold of comparisons runs
+        // one value at a time (these checks are most of an E-step's).
         let mut lanes = [0.0f64; 8];
         let mut chunks = values.chunks_exact(8);
         for c in &mut chunks {

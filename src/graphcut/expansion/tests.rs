@@ -262,8 +262,8 @@ fn forbidden_labels_are_avoided() {
     assert!(matches!(err, Err(Error::InvalidArgument { name, .. }) if name == "unary"));
 }
 
-/// Integer costs whose energies could pass int64 are refused (they used to wrap:
-/// four nodes at 2⁶² each reported energy 0); the largest safe ones still solve.
+/// Integer costs whose energies could pass int64 are refused (unchecked, four nodes at
+/// 2⁶² each would wrap to an energy of 0); the largest safe ones still solve.
 #[test]
 fn integer_costs_that_could_overflow_are_refused() {
     let big = 1i64 << 62;

@@ -158,8 +158,8 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(300))]
 
     /// The adoption clock restarting after every 1–3 augmentations (instead of
-    /// 65,535) must leave the trees acyclic and the flow exact; before the restart was
-    /// fixed, parent cycles made the solver loop for ever.
+    /// 65,535) leaves the trees acyclic and the flow exact (a restart that keeps stale
+    /// distances makes parent cycles, and the solver loops for ever).
     #[test]
     fn clock_restarts_keep_maxflow_exact(
         p in problem(9),
@@ -529,8 +529,8 @@ fn bad_input_is_rejected() {
 }
 
 /// Integer capacities whose sum could pass `i64::MAX` are refused by every entry
-/// point, naming the argument and changing nothing (they used to wrap: three
-/// terminal arcs of 2^62 gave a flow of −2^62).
+/// point, naming the argument and changing nothing (unchecked, three terminal arcs
+/// of 2^62 would wrap to a flow of −2^62).
 #[test]
 fn integer_sums_past_int64_are_refused_and_change_nothing() {
     let big = 1i64 << 62;
