@@ -5,7 +5,8 @@ use criterion::{criterion_group, criterion_main, Criterion};
 use depthpose::body::{param, BodyModel, Pose};
 use depthpose::cloud::{neighbour_graph, Cloud, Connectivity, DepthView};
 use depthpose::fit::em::{
-    hard_em, hard_em_from, unary_costs, unary_costs_for_labels, EmConfig, HeldLabels, NUM_LABELS,
+    hard_em, hard_em_from, unary_costs, unary_costs_for_labels, EmConfig, EmOptions, HeldLabels,
+    NUM_LABELS,
 };
 use depthpose::fit::free_space::FreeSpaceImage;
 use depthpose::fit::lm::{PoseObjective, N, NN};
@@ -58,27 +59,31 @@ fn bench(c: &mut Criterion) {
         camera: &cam,
         weight_scale: 1.0,
     };
+    let free_space_options = EmOptions {
+        free_space: Some(free_space),
+        ..EmOptions::default()
+    };
     let with_free_space = hard_em_from(
         &model,
         &cloud.points,
         &graph,
         &init,
-        None,
-        None,
-        Some(free_space),
+        free_space_options,
         &cfg,
     )
     .unwrap();
     g.bench_function("em_frame_320x240_free_space", |b| {
         b.iter(|| {
+            let options = EmOptions {
+                free_space: Some(free_space),
+                ..EmOptions::default()
+            };
             hard_em_from(
                 &model,
                 &cloud.points,
                 &graph,
                 black_box(&init),
-                None,
-                None,
-                Some(free_space),
+                options,
                 &cfg,
             )
             .unwrap()
@@ -139,7 +144,7 @@ fn bench(c: &mut Criterion) {
     }
     // Parts of one EM iteration. The terms are computed once here too: the E-step
     // benches below take them as input, also when a filter skips `unary_costs` (they
-    // were all zero then, and `e_step_expansion_warm` read 90 ms instead of 0.5 ms).
+    // would all be zero, and the expansion would start from a different problem).
     let mut unary = vec![0.0; cloud.len() * NUM_LABELS];
     unary_costs(&model, &cloud.points, &truth, &cfg, 0.1, &mut unary);
     g.bench_function("unary_costs", |b| {

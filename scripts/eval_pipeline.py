@@ -167,7 +167,11 @@ def main(argv: list[str] | None = None) -> int:
     model = None if args.height is None else dp.BodyModel(height=args.height)
     calibrate = {"auto": None, "on": True, "off": False}[args.calibrate]
     rows = []
-    summary: dict = {"sequences": {}, "config": {k: v if isinstance(v, (int, float, bool, type(None))) else repr(v) for k, v in config.as_dict().items()}, "height": args.height,
+    settings = {
+        k: v if isinstance(v, (int, float, bool, type(None))) else repr(v)
+        for k, v in config.as_dict().items()
+    }
+    summary: dict = {"sequences": {}, "config": settings, "height": args.height,
                      "calibrate": args.calibrate}  # fmt: skip
     for f in files:
         seq, depth, gt = _load(f, args.frames, args.start)

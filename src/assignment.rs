@@ -9,9 +9,8 @@
 //! row. The whole solve is O(n²·m) for n ≤ m rows. Outliers are handled by
 //! [`assignment_with_outliers`]: every item may stay unmatched at a fixed dummy cost.
 //!
-//! Jonker and Volgenant's column reduction and augmenting row reduction, tried as a
-//! start (sessions 8 and 12), made the matcher's solves slower, not faster, once the
-//! scan vectorised.
+//! Jonker and Volgenant's column reduction and augmenting row reduction are not used:
+//! with the vectorised scan they make the matcher's solves slower, not faster.
 
 use crate::error::{ensure, Result};
 
@@ -116,12 +115,29 @@ fn relax_row(
             return unsafe { relax_row_avx2(row, v, base, i, shortest, path) };
         }
     }
-    relax_columns(row, v, base, i, shortest, path, 0, (f64::INFINITY, NONE))
+    relax_columns(row, v, base, i, shortest, path, Partial::START)
 }
 
-/// [`relax_row`] from column `from` on, continuing the search for the least from
-/// `(least, pick)`.
-#[allow(clippy::too_many_arguments)]
+/// How far a row's relaxation has gone when [`relax_columns`] takes it over: the first
+/// column left, and the least distance so far with its column.
+#[derive(Debug, Clone, Copy)]
+struct Partial {
+    from: usize,
+    least: f64,
+    pick: usize,
+}
+
+impl Partial {
+    /// Nothing relaxed yet.
+    const START: Partial = Partial {
+        from: 0,
+        least: f64::INFINITY,
+        pick: NONE,
+    };
+}
+
+/// [`relax_row`] from column `partial.from` on, continuing the search for the least
+/// from `partial`.
 #[inline(always)]
 fn relax_columns(
     row: &[f64],
@@ -130,9 +146,13 @@ fn relax_columns(
     i: usize,
     shortest: &mut [f64],
     path: &mut [usize],
-    from: usize,
-    (mut least, mut pick): (f64, usize),
+    partial: Partial,
 ) -> (f64, usize) {
+    let Partial {
+        from,
+        mut least,
+        mut pick,
+    } = partial;
     for j in from..shortest.len() {
         let r = base + row[j] - v[j];
         if r < shortest[j] {
@@ -202,8 +222,13 @@ unsafe fn relax_row_avx512(
     let (mut lanes, mut cols) = ([0.0f64; 8], [0i64; 8]);
     _mm512_storeu_pd(lanes.as_mut_ptr(), least);
     _mm512_storeu_epi64(cols.as_mut_ptr(), at);
-    let best = least_across_lanes(&lanes, &cols);
-    relax_columns(row, v, base, i, shortest, path, full, best)
+    let (least, pick) = least_across_lanes(&lanes, &cols);
+    let partial = Partial {
+        from: full,
+        least,
+        pick,
+    };
+    relax_columns(row, v, base, i, shortest, path, partial)
 }
 
 /// [`relax_row`] with AVX2, four columns at a time; the same arithmetic and the same
@@ -251,8 +276,13 @@ unsafe fn relax_row_avx2(
     let (mut lanes, mut cols) = ([0.0f64; 4], [0i64; 4]);
     _mm256_storeu_pd(lanes.as_mut_ptr(), least);
     _mm256_storeu_si256(cols.as_mut_ptr() as *mut __m256i, at);
-    let best = least_across_lanes(&lanes, &cols);
-    relax_columns(row, v, base, i, shortest, path, full, best)
+    let (least, pick) = least_across_lanes(&lanes, &cols);
+    let partial = Partial {
+        from: full,
+        least,
+        pick,
+    };
+    relax_columns(row, v, base, i, shortest, path, partial)
 }
 
 /// Assigns the rows one at a time, each by a Dijkstra search over reduced costs from
@@ -551,16 +581,7 @@ mod tests {
                 let path: Vec<usize> = (0..n).map(|_| next() % 7).collect();
                 let base = (next() % 3) as f64 * 0.5 - 0.5;
                 let (mut s2, mut p2) = (shortest.clone(), path.clone());
-                let plain = relax_columns(
-                    &row,
-                    &v,
-                    base,
-                    9,
-                    &mut s2,
-                    &mut p2,
-                    0,
-                    (f64::INFINITY, NONE),
-                );
+                let plain = relax_columns(&row, &v, base, 9, &mut s2, &mut p2, Partial::START);
                 let bits = |x: &[f64]| x.iter().map(|d| d.to_bits()).collect::<Vec<_>>();
                 for (name, kernel) in &kernels {
                     let (mut s1, mut p1) = (shortest.clone(), path.clone());

@@ -12,9 +12,9 @@
 /// multiplies and adds on its own. Closures in the body (rayon's, for instance) are
 /// functions of their own and do not inherit the AVX2 build: dispatch inside them.
 macro_rules! avx2_dispatch {
-    ($(#[$meta:meta])* fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
+    ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $(-> $ret:ty)? $body:block) => {
         $(#[$meta])*
-        fn $name($($arg: $ty),*) $(-> $ret)? {
+        $vis fn $name($($arg: $ty),*) $(-> $ret)? {
             #[inline(always)]
             fn body($($arg: $ty),*) $(-> $ret)? $body
             #[cfg(target_arch = "x86_64")]
@@ -46,6 +46,7 @@ pub mod pipeline;
 pub mod pool;
 pub mod render;
 pub mod segment;
+mod simd;
 pub mod stereo;
 pub mod templates;
 mod union_find;

@@ -527,9 +527,9 @@ const NECK_BOTTOM: f64 = 0.5;
 const HEAD_ELLIPSOID_DROP: f64 = 0.3;
 /// Forward (−z) shift of the trunk and head ellipsoids from the joint line, as a
 /// fraction of their front-back half-axis: the joints of the realistic body (spine,
-/// head bone) sit toward the back of the trunk and head. Measured on the shared
-/// synthetic sequences (front views: model surface 3–6 cm behind the real chest, belly
-/// and face without it).
+/// head bone) sit toward the back of the trunk and head (without the shift, the model
+/// surface of the shared synthetic sequences' front views sits 3–6 cm behind the real
+/// chest, belly and face).
 const TORSO_FORWARD: f64 = 0.3;
 const PELVIS_FORWARD: f64 = 0.25;
 const NECK_FORWARD: f64 = 0.2;

@@ -8,7 +8,8 @@
 //! forward vs sideways); for each limb the start that fits its joints best is kept and a
 //! final LM polishes the combination. NaN joints are skipped.
 
-use super::lm::{LevenbergMarquardt, LmConfig, PoseObjective, N, NN};
+use super::lm::{LevenbergMarquardt, LmConfig};
+use super::system::{PoseObjective, N, NN};
 use crate::body::kinematics::Kinematics;
 use crate::body::{param, BodyModel, Pose, NUM_JOINTS, NUM_PARAMS};
 use crate::error::{Error, Result};

@@ -13,19 +13,15 @@
 //! are held fixed for the step (a projected / active-set LM), so a joint at its limit
 //! does not block the others. The cost therefore never increases.
 
-use super::free_space::FreeSpaceTerm;
-use crate::body::{pose_with_root_increment, root_rotation, BodyModel, Pose, NUM_PARAMS};
+use crate::body::{pose_with_root_increment, BodyModel, Pose};
 use crate::error::{ensure, Result};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
 use faer::{Mat, Par};
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::Vector3;
 use std::sync::atomic::{AtomicBool, Ordering as AtomicOrdering};
 
-/// Parameters per pose.
-pub const N: usize = NUM_PARAMS;
-/// Entries of the N×N normal matrix (row-major).
-pub const NN: usize = N * N;
+pub use super::system::{PoseObjective, N, NN};
 
 /// Relative floor of the damping diagonal (times the largest diagonal entry).
 const DIAGONAL_FLOOR_RELATIVE: f64 = 1e-6;
@@ -37,7 +33,7 @@ const BOUND_EPSILON: f64 = 1e-12;
 /// this fraction of the rejected one's: a step within 10 % of a rejected step's length
 /// is, while λ·D is still small beside H, nearly the same trial, and not worth a cost
 /// evaluation. (Shorter bounds save more evaluations but skip steps that would have
-/// been kept, and tracking lost accuracy: docs/fit.md, "Session 30".)
+/// been kept, and cost tracking accuracy: docs/fit.md.)
 const REJECTED_STEP_SHRINK: f64 = 0.9;
 
 /// Settings of [`LevenbergMarquardt`].
@@ -170,102 +166,6 @@ pub struct LmReport {
     /// Steps accepted.
     pub accepted: usize,
     pub termination: Termination,
-}
-
-/// A least-squares objective in the pose.
-pub trait PoseObjective {
-    /// The cost at `pose`.
-    fn cost(&mut self, pose: &Pose) -> f64;
-    /// The Gauss–Newton system at `pose`: `h` = JᵀWJ (N×N row-major, both triangles),
-    /// `g` = JᵀWr (the cost's gradient); returns the cost. Both outputs are overwritten.
-    fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64;
-}
-
-/// Soft prior toward a pose: cost ½ Σ wᵢ (θᵢ − θ_prior,ᵢ)², where for the root rotation
-/// the difference is the body-frame rotation log(R_priorᵀ R) (its Jacobian with respect
-/// to ω is taken as the identity, exact at the prior; the LM's cost test uses the exact
-/// cost, so this only affects the step, not the monotonicity).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PosePrior {
-    pub pose: Pose,
-    /// One weight per parameter (≥ 0).
-    pub weights: [f64; N],
-}
-
-impl PosePrior {
-    /// The same weight for translation (per m²), rotation and angles (per rad²).
-    pub fn uniform(pose: Pose, translation_weight: f64, angle_weight: f64) -> Self {
-        let mut weights = [angle_weight; N];
-        weights[..3].fill(translation_weight);
-        PosePrior { pose, weights }
-    }
-
-    fn residuals(&self, pose: &Pose) -> [f64; N] {
-        let mut r = [0.0; N];
-        for i in 0..N {
-            r[i] = pose[i] - self.pose[i];
-        }
-        let rel: Rotation3<f64> = root_rotation(&self.pose).inverse() * root_rotation(pose);
-        let w: Vector3<f64> = rel.scaled_axis();
-        r[3..6].copy_from_slice(w.as_slice());
-        r
-    }
-
-    /// The prior's cost.
-    pub fn cost(&self, pose: &Pose) -> f64 {
-        let r = self.residuals(pose);
-        0.5 * r
-            .iter()
-            .zip(&self.weights)
-            .map(|(r, w)| w * r * r)
-            .sum::<f64>()
-    }
-
-    /// Adds the prior's Gauss–Newton terms; returns its cost.
-    pub fn add_to(&self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
-        let r = self.residuals(pose);
-        let mut cost = 0.0;
-        for i in 0..N {
-            h[i * N + i] += self.weights[i];
-            g[i] += self.weights[i] * r[i];
-            cost += 0.5 * self.weights[i] * r[i] * r[i];
-        }
-        cost
-    }
-}
-
-/// An objective plus an optional prior and an optional free-space term.
-pub struct WithPrior<'a, O: PoseObjective> {
-    pub objective: &'a mut O,
-    pub prior: Option<&'a PosePrior>,
-    pub free_space: Option<&'a FreeSpaceTerm<'a>>,
-}
-
-/// The free-space term is evaluated beside the objective (its samples are a serial
-/// loop that would otherwise follow the objective's parallel one) and added after it,
-/// in the same order as one after the other, so the sums are the same bit for bit.
-impl<O: PoseObjective + Send> PoseObjective for WithPrior<'_, O> {
-    fn cost(&mut self, pose: &Pose) -> f64 {
-        let (c, free_space) = match self.free_space.filter(|f| f.active()) {
-            Some(f) => rayon::join(|| self.objective.cost(pose), || f.cost(pose)),
-            None => (self.objective.cost(pose), 0.0),
-        };
-        c + self.prior.map_or(0.0, |p| p.cost(pose)) + free_space
-    }
-    fn normal_equations(&mut self, pose: &Pose, h: &mut [f64; NN], g: &mut [f64; N]) -> f64 {
-        let (c, free_space) = match self.free_space.filter(|f| f.active()) {
-            Some(f) => {
-                let (c, system) = rayon::join(
-                    || self.objective.normal_equations(pose, h, g),
-                    || f.system(pose),
-                );
-                (c, Some((f, system)))
-            }
-            None => (self.objective.normal_equations(pose, h, g), None),
-        };
-        c + self.prior.map_or(0.0, |p| p.add_to(pose, h, g))
-            + free_space.map_or(0.0, |(f, system)| f.add_system(pose, &system, h, g))
-    }
 }
 
 /// `pose` moved by the LM step `delta` (root rotation via the body-frame increment) and
@@ -482,6 +382,8 @@ impl LevenbergMarquardt {
 #[allow(clippy::needless_range_loop)] // parallel arrays indexed together
 mod tests {
     use super::*;
+    use crate::body::root_rotation;
+    use crate::fit::terms::{PosePrior, WithPrior};
 
     /// A quadratic bowl with a non-diagonal Hessian: cost ½ (θ − c)ᵀ A (θ − c) on the
     /// non-rotation parameters, minimum at c (inside the limits).

@@ -6,29 +6,34 @@
 //! joints, per-pixel part labels and diagnostics.
 
 pub mod em;
-pub mod free_space;
 pub mod ik;
 pub mod lm;
-pub mod objective;
 pub mod shape;
 pub mod start;
+pub mod system;
+pub mod terms;
+
+/// The data term ([`terms::data`]).
+pub use terms::data as objective;
+pub use terms::free_space;
 
 use crate::body::{pose_from_slice, BodyModel, Pose, NUM_JOINTS, NUM_SEGMENTS};
 use crate::camera::Camera;
 use crate::cloud::{neighbour_graph, Cloud, Connectivity, DepthView, PixelGraph};
 use crate::error::{Error, Result};
-use free_space::{FreeSpaceImage, FreeSpaceTerm};
 use nalgebra::Vector3;
 use rayon::prelude::*;
+use terms::free_space::{FreeSpaceImage, FreeSpaceTerm};
 
 pub use em::{
-    hard_em, hard_em_from, label_points, EmConfig, EmResult, EmResume, EmTermination, PointLabels,
-    OUTLIER,
+    hard_em, hard_em_from, label_points, EmConfig, EmOptions, EmResult, EmResume, EmTermination,
+    PointLabels, OUTLIER,
 };
 pub use ik::pose_from_joints;
-pub use lm::{LevenbergMarquardt, LmConfig, LmReport, PosePrior, Termination};
-pub use objective::Loss;
+pub use lm::{LevenbergMarquardt, LmConfig, LmReport, Termination};
 pub use shape::{fit_shape, shape_lm, ShapeConfig, ShapeFrame, ShapeResult};
+pub use terms::Loss;
+pub use terms::PosePrior;
 
 /// Fewer foreground points than this cannot constrain 22 parameters.
 pub const MIN_POINTS: usize = 50;
@@ -429,14 +434,17 @@ impl FitProblem {
         let config = &self.config;
         let Some((sub_cloud, sub_cam, sub_graph, sub_depth)) = &self.sub else {
             let free_space = self.free_space_image();
+            let options = EmOptions {
+                resume,
+                prior,
+                free_space,
+            };
             return hard_em_from(
                 model,
                 &self.cloud.points,
                 &self.graph,
                 init,
-                resume,
-                prior,
-                free_space,
+                options,
                 &config.em,
             );
         };
@@ -453,14 +461,17 @@ impl FitProblem {
             camera: sub_cam,
             weight_scale: 1.0 / (s * s) as f64,
         });
+        let options = EmOptions {
+            resume,
+            prior: scaled_prior.as_ref(),
+            free_space,
+        };
         hard_em_from(
             model,
             &sub_cloud.points,
             sub_graph,
             init,
-            resume,
-            scaled_prior.as_ref(),
-            free_space,
+            options,
             &config.em,
         )
     }
@@ -564,20 +575,17 @@ impl FitProblem {
                 ..config.em
             };
             let free_space = self.free_space_image();
-            let fine = hard_em_from(
-                model,
-                &cloud.points,
-                graph,
-                &em.pose,
-                Some(EmResume {
-                    labels: &labels,
-                    iterations: em.iterations,
-                    anneal_cut: em.anneal_cut,
-                }),
+            let resume = EmResume {
+                labels: &labels,
+                iterations: em.iterations,
+                anneal_cut: em.anneal_cut,
+            };
+            let options = EmOptions {
+                resume: Some(resume),
                 prior,
                 free_space,
-                &fine_config,
-            )?;
+            };
+            let fine = hard_em_from(model, &cloud.points, graph, &em.pose, options, &fine_config)?;
             // The fine stage is a bounded refinement: spending its budget says nothing
             // about the EM's convergence, which the strided stage reports.
             let termination = match fine.termination {

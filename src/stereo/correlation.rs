@@ -509,8 +509,8 @@ fn similarity_value(similarity: Similarity, cov: f32, vl: f32, vr: f32) -> f32 {
 /// Each row has its own four-lane accumulator, and the rows are summed in order
 /// afterwards: the same multiplications and additions in the same order as a scalar loop,
 /// so the result is bit-identical to it. Explicit SSE (the x86-64 baseline) because the
-/// compiler, seeing lane 3 unused, split the lanes into a pair and a scalar and more than
-/// doubled the instructions.
+/// compiler, seeing lane 3 unused, splits the lanes into a pair and a scalar and more
+/// than doubles the instructions.
 ///
 /// # Safety
 /// `left` must be readable for rows j < SIDE of SIDE pixels at `left + j·w`, and `right`
@@ -589,16 +589,13 @@ mod tests {
             .collect()
     }
 
-    /// Brute-force correlation straight from the definition.
-    #[allow(clippy::too_many_arguments)]
+    /// Brute-force correlation straight from the definition, of the window of
+    /// half-size `half` at (x, y) in `l` (`w` pixels wide) with the one at (x − d, y)
+    /// in `r`.
     fn brute(
-        l: &[f32],
-        r: &[f32],
-        w: usize,
+        (l, r, w): (&[f32], &[f32], usize),
         half: usize,
-        x: usize,
-        y: usize,
-        d: usize,
+        (x, y, d): (usize, usize, usize),
         sim: Similarity,
     ) -> f64 {
         let (mut nl, mut nr) = (l.to_vec(), r.to_vec());
@@ -637,7 +634,7 @@ mod tests {
                 let c = Correlator::new(l.clone(), r.clone(), w, h, half, 1e-3, sim).unwrap();
                 for (x, y, d) in [(10, 8, 0), (15, 5, 7), (19, 13, 3), (half + 4, half, 4)] {
                     let got = c.score(x, y, d) as f64;
-                    let want = brute(&l, &r, w, half, x, y, d, sim);
+                    let want = brute((&l, &r, w), half, (x, y, d), sim);
                     assert!(
                         (got - want).abs() < 1e-4,
                         "{sim:?} h={half} ({x},{y},{d}): {got} vs {want}"

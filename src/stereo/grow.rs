@@ -420,8 +420,8 @@ impl Grower {
 }
 
 /// Growers kept between calls, so that a stream of frames does not allocate (and fault
-/// in) the per-pixel state and the queue's buckets afresh for every band of every call:
-/// perf put 5–7 % of a call on the cones pair in that allocation.
+/// in) the per-pixel state and the queue's buckets afresh for every band of every call
+/// (a few per cent of a call on the stereo benchmark's pairs).
 static POOL: Mutex<Vec<Grower>> = Mutex::new(Vec::new());
 
 /// Most bytes of grower storage kept in the pool between calls.

@@ -477,8 +477,8 @@ fn fill_gaps(disp: &mut [i32], corr: &Correlator, max_d: usize, threshold: f32) 
 /// By runs rather than by a flood fill: each row is cut into runs of matched pixels
 /// joined left to right, runs of consecutive rows are merged (union–find) where any
 /// column they share joins them vertically, and the runs of small segments are cleared.
-/// Every pass reads the map in order; the flood fill's stack and its per-pixel labels
-/// jumped between rows and took ≈ 7 % of a call on the cones pair.
+/// Every pass reads the map in order, where a flood fill's stack and its per-pixel
+/// labels jump between rows.
 fn remove_small_segments(disp: &mut [i32], width: usize, height: usize, min_size: usize) {
     let joined = |a: i32, b: i32| a != UNMATCHED && b != UNMATCHED && (a - b).abs() <= SEGMENT_STEP;
     // Runs as [start, end) pixel indices, row by row; `row_runs[y]..row_runs[y + 1]`

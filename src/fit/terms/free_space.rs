@@ -17,8 +17,9 @@
 //! without a reading (0 or NaN) and samples outside the image add nothing: their space
 //! is unknown. (Comparing with the nearest reading within 1 or 2 pixels instead, which
 //! spares a sample on a segment's outline that projects onto the part behind it, fitted
-//! the shared sequences worse: docs/fit.md.) The background must be in the depth image for the silhouette to count
-//! (the fit's mask selects the person's points; the term reads every pixel).
+//! the shared sequences worse: docs/fit.md.) The background must be in the depth image
+//! for the silhouette to count (the fit's mask selects the person's points; the term
+//! reads every pixel).
 //!
 //! The residual's gradient with respect to the sample's camera-frame position is taken
 //! as (0, 0, −1): the reading D is held constant over the step (it is piecewise constant
@@ -27,11 +28,10 @@
 //! energy counts this term, and the E-step does not change it, so the EM energy still
 //! never increases either.
 
-use super::lm::{N, NN};
-use super::objective::{accumulate_row, add_segment_moments, mirror_upper, SYM6};
 use crate::body::residuals::PoseGeometry;
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
 use crate::camera::Camera;
+use crate::fit::system::{accumulate_row, add_segment_moments, mirror_upper, N, NN, SYM6};
 use std::sync::Mutex;
 
 /// Surface samples per segment.
@@ -353,8 +353,10 @@ mod tests {
     /// have weighted residuals.
     #[test]
     fn the_term_beside_the_data_term_adds_up_as_one_after_the_other() {
-        use crate::fit::lm::{PoseObjective, PosePrior, WithPrior};
-        use crate::fit::objective::{Loss, PointCost, PointObjective};
+        use crate::fit::system::PoseObjective;
+        use crate::fit::terms::data::PointObjective;
+        use crate::fit::terms::{Loss, PointCost};
+        use crate::fit::terms::{PosePrior, WithPrior};
         let model = BodyModel::default();
         let cam = camera();
         let pose = pose_for_tests(5);
@@ -407,8 +409,10 @@ mod tests {
     /// by moving the body back, never raising the cost on the way.
     #[test]
     fn surface_in_front_of_the_readings_is_pushed_behind_them() {
-        use crate::fit::lm::{LevenbergMarquardt, LmConfig, WithPrior};
-        use crate::fit::objective::{Loss, PointCost, PointObjective};
+        use crate::fit::lm::{LevenbergMarquardt, LmConfig};
+        use crate::fit::terms::data::PointObjective;
+        use crate::fit::terms::WithPrior;
+        use crate::fit::terms::{Loss, PointCost};
         let model = BodyModel::default();
         let cam = camera();
         let mut pose = BodyModel::neutral_pose();
@@ -436,8 +440,7 @@ mod tests {
         let mut lm = LevenbergMarquardt::new(LmConfig {
             max_iterations: 100,
             // Stop at zero cost, not at a step of 1e-7 (the default), which can leave
-            // a sample a micrometre or two in front depending on the path (an LM
-            // variant tried in session 30 stopped there with one at 1.5 µm).
+            // a sample a micrometre or two in front depending on the path.
             step_tolerance: 1e-10,
             ..LmConfig::default()
         })

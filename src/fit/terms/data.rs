@@ -9,135 +9,17 @@
 //! so the result is deterministic and no allocation happens per call once the buffers
 //! have grown to the cloud size.
 
-use super::lm::{PoseObjective, N, NN};
+pub use super::loss::{Loss, PointCost};
 use crate::body::ellipsoid::SortedPlacement;
-use crate::body::residuals::{cross, group_by_segment, PoseGeometry, MAX_SEGMENT_DOFS};
+use crate::body::residuals::{group_by_segment, PoseGeometry};
 use crate::body::{BodyModel, Pose, NUM_SEGMENTS};
+use crate::fit::system::{
+    accumulate_row, add_segment_moments, mirror_upper, PoseObjective, N, NN, SYM6,
+};
 use rayon::prelude::*;
 
 /// Points per parallel chunk.
 pub const CHUNK_POINTS: usize = 512;
-
-/// Robust loss of the residuals.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Loss {
-    /// ρ(r) = r²/2.
-    Squared,
-    /// Quadratic up to `delta` (m), linear beyond.
-    Huber(f64),
-    /// ρ(r) = δ²/2 · ln(1 + r²/δ²).
-    Cauchy(f64),
-}
-
-impl Loss {
-    /// ρ(r).
-    #[inline]
-    pub fn rho(self, r: f64) -> f64 {
-        match self {
-            Loss::Squared => 0.5 * r * r,
-            Loss::Huber(d) => {
-                let a = r.abs();
-                if a <= d {
-                    0.5 * r * r
-                } else {
-                    d * (a - 0.5 * d)
-                }
-            }
-            Loss::Cauchy(d) => 0.5 * d * d * (r * r / (d * d)).ln_1p(),
-        }
-    }
-
-    /// The residual r ≥ 0 with ρ(r) = `v` (≥ 0): ρ's inverse on r ≥ 0, where it
-    /// increases.
-    #[inline]
-    pub fn rho_inverse(self, v: f64) -> f64 {
-        match self {
-            Loss::Squared => (2.0 * v).sqrt(),
-            Loss::Huber(d) => {
-                if v <= 0.5 * d * d {
-                    (2.0 * v).sqrt()
-                } else {
-                    v / d + 0.5 * d
-                }
-            }
-            Loss::Cauchy(d) => d * (2.0 * v / (d * d)).exp_m1().sqrt(),
-        }
-    }
-
-    /// IRLS weight ρ'(r)/r.
-    #[inline]
-    pub fn weight(self, r: f64) -> f64 {
-        match self {
-            Loss::Squared => 1.0,
-            Loss::Huber(d) => {
-                let a = r.abs();
-                if a <= d {
-                    1.0
-                } else {
-                    d / a
-                }
-            }
-            Loss::Cauchy(d) => 1.0 / (1.0 + r * r / (d * d)),
-        }
-    }
-}
-
-/// Per-point cost settings shared by the E-step unary and the M-step.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PointCost {
-    /// Residual scale σ (m): cost = ρ(r)/σ².
-    pub sigma: f64,
-    pub loss: Loss,
-    /// Residuals beyond this (m) cost the constant ρ(T)/σ².
-    pub truncation: f64,
-}
-
-impl PointCost {
-    /// Cost of residual `r`.
-    #[inline]
-    pub fn cost(&self, r: f64) -> f64 {
-        self.loss.rho(r.abs().min(self.truncation)) / (self.sigma * self.sigma)
-    }
-
-    /// The largest residual whose cost is at most `c` (from ρ's inverse, so within a
-    /// rounding): infinite when even the cap is at most `c`.
-    #[inline]
-    pub fn residual_within(&self, c: f64) -> f64 {
-        if c >= self.cap() {
-            f64::INFINITY
-        } else {
-            self.loss.rho_inverse(c.max(0.0) * self.sigma * self.sigma)
-        }
-    }
-
-    /// The constant cost of a truncated residual.
-    #[inline]
-    pub fn cap(&self) -> f64 {
-        self.loss.rho(self.truncation) / (self.sigma * self.sigma)
-    }
-
-    /// (cost, IRLS weight / σ²) of residual `r`; the weight is 0 beyond the truncation.
-    #[inline]
-    fn cost_and_weight(&self, r: f64) -> (f64, f64) {
-        let s2 = self.sigma * self.sigma;
-        if r.abs() > self.truncation {
-            (self.cap(), 0.0)
-        } else {
-            (self.loss.rho(r) / s2, self.loss.weight(r) / s2)
-        }
-    }
-}
-
-/// Entries of a symmetric 6×6 matrix's upper triangle.
-pub(crate) const SYM6: usize = 21;
-
-/// Position of entry (a, b) of a symmetric 6×6 matrix in its packed upper triangle
-/// (row by row: (0,0) … (0,5), (1,1) … (5,5)).
-#[inline]
-fn sym6_index(a: usize, b: usize) -> usize {
-    let (a, b) = (a.min(b), a.max(b));
-    a * (11 - a) / 2 + b
-}
 
 /// One chunk's share of the normal equations, per segment: with q = (n, p × n) of each
 /// weighted point (see [`PoseGeometry::dof_basis`]), the upper triangle of Σ w q qᵀ and
@@ -566,71 +448,6 @@ impl PoseObjective for PointObjective<'_> {
     }
 }
 
-/// Adds segment `k`'s share of the normal equations, given its weighted sums over
-/// points or samples with rows q = (n, p × n) (see [`PoseGeometry::dof_basis`]): the
-/// packed upper triangle `qq` of Σ w q qᵀ and `qr` = Σ w r q. With B the segment's
-/// parameter basis, JᵀWJ += Bᵀ(QᵀWQ)B (into the upper triangle of `h`, in parameter
-/// order; see [`mirror_upper`]) and JᵀWr += Bᵀ(QᵀWr).
-pub(crate) fn add_segment_moments(
-    geo: &PoseGeometry,
-    k: usize,
-    qq: &[f64; SYM6],
-    qr: &[f64; 6],
-    h: &mut [f64; NN],
-    g: &mut [f64; N],
-) {
-    let s: [[f64; 6]; 6] = std::array::from_fn(|a| std::array::from_fn(|b| qq[sym6_index(a, b)]));
-    let dofs = geo.segment_dofs(k);
-    let mut basis = [[0.0; 6]; MAX_SEGMENT_DOFS];
-    let mut s_basis = [[0.0; 6]; MAX_SEGMENT_DOFS];
-    for (j, &dof) in dofs.iter().enumerate() {
-        basis[j] = geo.dof_basis(dof);
-        for a in 0..6 {
-            s_basis[j][a] = (0..6).map(|b| s[a][b] * basis[j][b]).sum();
-        }
-    }
-    for (i, &di) in dofs.iter().enumerate() {
-        g[di] += (0..6).map(|a| basis[i][a] * qr[a]).sum::<f64>();
-        // Upper triangle in dof order (`dofs` ascends).
-        for (j, &dj) in dofs.iter().enumerate().skip(i) {
-            h[di * N + dj] += (0..6).map(|a| basis[i][a] * s_basis[j][a]).sum::<f64>();
-        }
-    }
-}
-
-/// Copies the upper triangle of `h` into its lower one.
-pub(crate) fn mirror_upper(h: &mut [f64; NN]) {
-    for i in 0..N {
-        for j in 0..i {
-            h[i * N + j] = h[j * N + i];
-        }
-    }
-}
-
-/// Adds weighted row q = (n, p × n) with residual `r` and weight `w` to the packed sums
-/// `qq` (upper triangle of Σ w q qᵀ) and `qr` (Σ w r q).
-#[inline(always)]
-pub(crate) fn accumulate_row(
-    p: &[f64; 3],
-    n: &[f64; 3],
-    r: f64,
-    w: f64,
-    qq: &mut [f64; SYM6],
-    qr: &mut [f64; 6],
-) {
-    let m = cross(p, n);
-    let q = [n[0], n[1], n[2], m[0], m[1], m[2]];
-    let mut e = 0;
-    for a in 0..6 {
-        let wq = w * q[a];
-        qr[a] += wq * r;
-        for &qb in &q[a..] {
-            qq[e] += wq * qb;
-            e += 1;
-        }
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -973,35 +790,6 @@ mod tests {
             infinite > 100 && exact > 100,
             "{infinite} infinite, {exact} exact"
         );
-    }
-
-    /// ρ's inverse on r ≥ 0 for every loss, and the largest residual within a cost:
-    /// its cost is the given one (below the cap), infinite at and above the cap.
-    #[test]
-    fn rho_inverse_and_residual_within() {
-        for loss in [Loss::Squared, Loss::Huber(0.03), Loss::Cauchy(0.05)] {
-            for k in 0..200 {
-                let r = 0.002 * k as f64;
-                let back = loss.rho_inverse(loss.rho(r));
-                assert!(
-                    (back - r).abs() <= 1e-12 * (1.0 + r),
-                    "{loss:?}: {r} -> {back}"
-                );
-            }
-            let pc = PointCost {
-                sigma: 0.02,
-                loss,
-                truncation: 0.2,
-            };
-            for k in 0..100 {
-                let c = pc.cap() * k as f64 / 100.0;
-                let r = pc.residual_within(c);
-                assert!(r < pc.truncation);
-                assert!((pc.cost(r) - c).abs() <= 1e-12 * (1.0 + c), "{loss:?}: {c}");
-            }
-            assert_eq!(pc.residual_within(pc.cap()), f64::INFINITY);
-            assert_eq!(pc.residual_within(f64::INFINITY), f64::INFINITY);
-        }
     }
 
     /// The cost is the sum of the per-point costs with one exact scalar query each
