@@ -5,7 +5,7 @@
 //! thread to sleep until they finish, so every loop costs two context switches on top
 //! of the workers' own wake-ups. One hard-EM frame runs some hundred such loops (the
 //! unary terms, each LM cost and normal system, the free-space term), and on a 2-core
-//! machine those switches cost more than a fifth of the frame (docs/fit.md). Started
+//! machine those switches cost more than a fifth of the frame (docs/design.md). Started
 //! on a worker, the same loops split their work with the other
 //! worker directly; the caller sleeps once for the whole call.
 

@@ -39,7 +39,7 @@ def test_fit_recovers_rendered_pose_within_1cm_mean():
     """Eight starts perturbed by up to 20 degrees and 0.1 m: every one reaches joints
     within 1 cm on average. (Without the recentred second start a quarter of such starts
     fell into another basin, mostly from the translation; 40 of 40 reach 1 cm with it,
-    docs/fit.md.) The fit from two starts never ends above the fit from the given start
+    docs/design.md.) The fit from two starts never ends above the fit from the given start
     alone, whose EM is one of the two."""
     model = BodyModel()
     truth = natural_pose(model)
@@ -229,7 +229,7 @@ def test_swapped_limb_starts_recover_exchanged_limbs():
 
 def test_fit_with_sensor_noise_within_3cm_mean():
     """Kinect-like noise (1.5 mm * z^2, mm quantisation), eight perturbed starts: at least
-    seven reach a mean joint error < 3 cm (40 of 40 did in docs/fit.md's run; without the
+    seven reach a mean joint error < 3 cm (40 of 40 did in docs/design.md's run; without the
     recentred second start 36 of 40, those that do end at 2 mm median)."""
     model = BodyModel()
     truth = natural_pose(model)

@@ -14,7 +14,7 @@ InvalidInputError = _core.InvalidInputError
 CONES = Path(__file__).resolve().parent.parent.parent / "shared" / "data" / "stereo" / "cones"
 
 # What the matcher reaches on cones (disparities 0..63), with a little slack; measured
-# with scripts/eval_stereo.py (see docs/stereo.md).
+# with scripts/eval_stereo.py (see docs/design.md).
 CONES_MIN_DENSITY = 0.83
 CONES_MAX_BAD2 = 0.05
 

@@ -193,7 +193,7 @@ def test_progress_bar(capsys):
 
 @pytest.mark.skipif(not SYNTH.is_dir(), reason="shared synthetic data not found")
 def test_initial_pose_on_synthetic_front_walk(db):
-    """PCK@10cm of the placed top template on a front-view walk (see docs/templates.md
+    """PCK@10cm of the placed top template on a front-view walk (see docs/design.md
     for all sequences)."""
     d = np.load(SYNTH / "dm_walk_front.npz")
     fx, fy, cx, cy = d["intrinsics"]
@@ -222,7 +222,7 @@ def test_rerank_grows_the_short_list_and_keeps_the_candidates(db):
 def test_rerank_improves_the_placed_pose_on_synthetic_walks(db):
     """``rerank`` re-orders the exact stage's best candidates by their placed fit
     energy: the first candidate's joints are nearer the truth (PCK@10cm over every 3rd
-    frame of two walks: docs/templates.md has all sequences), and the candidates are the
+    frame of two walks: docs/design.md has all sequences), and the candidates are the
     re-ranked ten's head."""
     hits = {0: [], 10: []}
     for name in ("dm_walk_front", "cmu131_01_walk_front"):
@@ -268,7 +268,7 @@ def _retrieval(db: TemplateDatabase, n: int = 60) -> tuple[int, int]:
 
 def test_retrieval_on_perturbed_model_renders(db):
     """The issue's retrieval test. Targets of the issue: top-1 95 %, top-10 99 %;
-    reached (docs/templates.md): top-1 ≈ 55–70 % counting exact ties (indistinguishable
+    reached (docs/design.md): top-1 ≈ 55–70 % counting exact ties (indistinguishable
     templates), top-10 ≈ 100 %."""
     n = 60
     top1, top10 = _retrieval(db, n)

@@ -1,7 +1,7 @@
 """Stereo matching by Growing Correspondence Seeds, and disparity → depth.
 
 Images are a rectified pair; left pixel ``x`` matches right pixel ``x - d`` (``d >= 0``).
-Unmatched pixels get NaN. See ``docs/stereo.md`` for the method and its accuracy.
+Unmatched pixels get NaN. See ``docs/design.md`` for the method and its accuracy.
 """
 
 from __future__ import annotations

@@ -168,7 +168,7 @@ class TemplateDatabase:
         the body centred; descriptors are scale-invariant). ``depth_weight`` > 0
         adds the body's relief (depth relative to its centre) as a fourth value per
         bin, a depthpose extension of the paper's normals-only descriptor; off by
-        default (docs/templates.md has its effect on retrieval and on the pipeline).
+        default (docs/design.md has its effect on retrieval and on the pipeline).
         """
         if camera is not None:
             if not isinstance(camera, Camera):
@@ -237,7 +237,7 @@ class TemplateDatabase:
         well each placed pose explains the depth in 3-D (the fit's data and free-space
         terms): a better first candidate (own-model top-1 57 → 69 %, placed PCK@10cm on
         the shared sequences 0.36 → 0.39 with ``R=10``) for about 0.22 ms per candidate.
-        The short list grows to ``max(shortlist, top_k, R)``. See docs/templates.md."""
+        The short list grows to ``max(shortlist, top_k, R)``. See docs/design.md."""
         found, _ = self._db.match_depth(
             depth,
             camera,

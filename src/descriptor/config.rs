@@ -27,7 +27,7 @@ pub struct DescriptorConfig {
     /// across the line of sight (so it is scale-invariant like the rest), summed per
     /// bin like the normals. 0 (the default): off, the paper's normals-only
     /// descriptor. The normals alone cannot tell an arm held toward the camera from
-    /// one hanging down in front of the body; the relief can (docs/templates.md).
+    /// one hanging down in front of the body; the relief can (docs/design.md).
     pub depth_weight: f64,
 }
 

@@ -33,7 +33,7 @@ const BOUND_EPSILON: f64 = 1e-12;
 /// this fraction of the rejected one's: a step within 10 % of a rejected step's length
 /// is, while λ·D is still small beside H, nearly the same trial, and not worth a cost
 /// evaluation. (Shorter bounds save more evaluations but skip steps that would have
-/// been kept, and cost tracking accuracy: docs/fit.md.)
+/// been kept, and cost tracking accuracy: docs/design.md.)
 const REJECTED_STEP_SHRINK: f64 = 0.9;
 
 /// Settings of [`LevenbergMarquardt`].

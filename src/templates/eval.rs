@@ -18,7 +18,7 @@ pub(super) fn database() -> &'static TemplateDatabase {
         } else {
             TemplateRenderer::Superquadric
         };
-        // The relief channel's weight (docs/templates.md compares 0 and 3).
+        // The relief channel's weight (docs/design.md compares 0 and 3).
         let depth_weight = std::env::var("DEPTHPOSE_EVAL_DEPTH_WEIGHT")
             .ok()
             .and_then(|v| v.parse().ok())
@@ -159,7 +159,7 @@ fn retrieval_accuracy() {
     println!(
         "top1 {top1}/{n} (tied with the winner: {top1_tied}/{n}) top10 {top10}/{n} pck {pck:.3}"
     );
-    // What the descriptors reach (see docs/templates.md).
+    // What the descriptors reach (see docs/design.md).
     assert!(top1_tied as f64 >= 0.55 * n as f64, "top-1 {top1_tied}/{n}");
     assert!(top10 as f64 >= 0.95 * n as f64, "top-10 {top10}/{n}");
     assert!(pck > 0.85, "PCK {pck}");

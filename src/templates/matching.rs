@@ -36,7 +36,7 @@ pub struct MatchConfig {
     /// depth in 3-D: the fit's data and free-space terms at the placed pose (see
     /// [`TemplateDatabase::match_depth`]). Off by default: it costs about 0.22 ms per
     /// candidate and improves the placed pose, not the fit that follows
-    /// (docs/templates.md).
+    /// (docs/design.md).
     pub rerank: usize,
 }
 

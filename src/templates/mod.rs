@@ -125,3 +125,6 @@ impl TemplateConfig {
         )
     }
 }
+
+#[cfg(test)]
+mod format_fuzz;

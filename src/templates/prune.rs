@@ -57,7 +57,7 @@ impl PruneIndex {
         }
         mean.iter_mut().for_each(|a| *a /= m.max(1) as f64);
         // Lower triangle of the scatter matrix (a matrix product over a centred copy
-        // is no faster here and slows the matching after it: docs/templates.md).
+        // is no faster here and slows the matching after it: docs/design.md).
         let mut scatter = vec![0.0f64; dim * dim];
         let mut c = vec![0.0f64; dim];
         for r in &rows {

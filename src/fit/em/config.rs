@@ -81,7 +81,7 @@ impl Default for EmConfig {
             lm: LmConfig {
                 // The EM loop re-linearises after every E-step anyway; a few LM
                 // iterations per M-step fit the shared sequences better and faster than
-                // a full solve (docs/fit.md).
+                // a full solve (docs/design.md).
                 max_iterations: 3,
                 cost_tolerance: 1e-5,
                 ..LmConfig::default()

@@ -21,7 +21,7 @@ pub struct ShapeConfig {
     /// Weight w of the prior ½·w·Σ(s − 1)² (≥ 0): keeps factors the data hardly
     /// constrain (e.g. the depth of the torso seen from the front) near the base shape.
     /// Default 1e5: on the shared synthetic sequences (a mesh body, not ellipsoids) a
-    /// weaker prior (1e3) trades joint accuracy for surface fit (docs/fit.md).
+    /// weaker prior (1e3) trades joint accuracy for surface fit (docs/design.md).
     pub prior_weight: f64,
     /// Stop when a round lowers the energy by less than this fraction.
     pub tolerance: f64,

@@ -17,7 +17,7 @@
 //! without a reading (0 or NaN) and samples outside the image add nothing: their space
 //! is unknown. (Comparing with the nearest reading within 1 or 2 pixels instead, which
 //! spares a sample on a segment's outline that projects onto the part behind it, fitted
-//! the shared sequences worse: docs/fit.md.) The background must be in the depth image
+//! the shared sequences worse: docs/design.md.) The background must be in the depth image
 //! for the silhouette to count (the fit's mask selects the person's points; the term
 //! reads every pixel).
 //!

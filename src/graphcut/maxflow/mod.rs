@@ -68,7 +68,7 @@ use std::collections::VecDeque;
 ///
 /// Integer capacities: the caller keeps the sum of every capacity added (and every
 /// |change|) within the type's range; it bounds every flow and residual sum formed, and
-/// beyond it they would wrap (the Python binding enforces this; `docs/graphcut.md`).
+/// beyond it they would wrap (the Python binding enforces this; `docs/design.md`).
 #[derive(Clone, Debug)]
 pub struct Graph<C: Capacity> {
     n: usize,
