@@ -216,3 +216,30 @@ def test_raw_u16_frames_are_checked_before_reading(tmp_path):
     )
     assert "MAX_IMAGE_PIXELS" in str(e)
     refused(lambda: dp.read_depth(tmp_path / "d.u16", shape=(5, 8)), dp.FileFormatError, "shape")
+
+
+def test_every_reader_reports_a_missing_file_alike(tmp_path):
+    from depthpose import synth
+    from depthpose.sequence import open_sequence
+
+    missing = tmp_path / "nothing.npz"
+    for read in (synth.load, open_sequence, dp.read_depth):
+        with pytest.raises(FileNotFoundError) as e:
+            read(missing)
+        assert isinstance(e.value, dp.DepthPoseError), read
+
+
+def test_scores_of_mismatched_shapes_are_a_clear_error():
+    from depthpose.metrics import evaluate
+
+    with pytest.raises(dp.InvalidInputError, match="pred"):
+        evaluate(np.zeros((3, 15, 3)), np.zeros((4, 15, 3)))
+
+
+def test_a_batch_with_a_corrupt_template_file_fails_once_and_clearly(tmp_path):
+    from depthpose.batch import run
+
+    bad = tmp_path / "templates.npz"
+    bad.write_bytes(b"not a zip file")
+    with pytest.raises(dp.FileFormatError, match="templates"):
+        run([tmp_path / "seq.npz"], tmp_path / "out", templates=bad, progress=False)

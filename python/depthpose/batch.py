@@ -267,6 +267,12 @@ def run(
         # Build (or load) the cached default once here; workers load it from its file.
         TemplateDatabase.default(progress=progress)
         templates = TemplateDatabase.default_path()
+    else:
+        from .templates import TemplateDatabase
+
+        # A missing or corrupt file fails here, once, with its own error, not in every
+        # worker's task.
+        TemplateDatabase.load(templates)
     specs, plans = [], {}
     for seq in seqs:
         plans[seq.name] = plan_chunks(seq.n_frames, chunk_frames)

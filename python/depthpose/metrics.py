@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._core import InvalidInputError
+
 __all__ = ["evaluate"]
 
 
@@ -13,7 +15,7 @@ def evaluate(pred: np.ndarray, gt: np.ndarray, threshold: float = 0.10) -> dict[
     pred = np.asarray(pred, np.float64)
     gt = np.asarray(gt, np.float64)
     if pred.shape != gt.shape:
-        raise ValueError(f"shape mismatch: pred {pred.shape} vs gt {gt.shape}")
+        raise InvalidInputError(f"pred: shape {pred.shape} does not match gt's {gt.shape}")
     valid = np.isfinite(pred).all(-1)
     err = np.linalg.norm(np.where(valid[..., None], pred, 0.0) - gt, axis=-1)
     hit = valid & (err <= threshold + 1e-9)

@@ -329,6 +329,8 @@ def load(path: str | Path) -> dict[str, np.ndarray]:
         with np.load(path, allow_pickle=False) as d:
             return {k: d[k] for k in d.files}
     except FileNotFoundError:
-        raise FileFormatError(f"{path}: no such file") from None
+        from .io import missing_file
+
+        raise missing_file(path) from None
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
         raise FileFormatError(f"{path}: not a sequence file ({e})") from None
