@@ -47,6 +47,8 @@ pub struct Frame {
     pub depth: Vec<f32>,
     pub mask: Vec<bool>,
     pub segmentation: Option<Segmentation>,
+    /// The part labels of the frame's result, at the working resolution (empty before).
+    pub labels: Vec<i16>,
     problems: Vec<FitProblem>,
 }
 
@@ -113,7 +115,7 @@ impl Estimator {
         let hypotheses = self.config.hypotheses;
         let (best, score) = self.search(&mut frame, &[], hypotheses, true, Some(&mut clock))?;
         clock.lap("fit");
-        Ok(self.result(&frame, best, score, Source::Templates, clock))
+        Ok(self.result(&mut frame, best, score, Source::Templates, clock, None))
     }
 
     /// The frame at the working resolution with the person's pixels: `mask` (the
@@ -153,6 +155,7 @@ impl Estimator {
             depth: work,
             mask,
             segmentation,
+            labels: Vec::new(),
             problems: Vec::new(),
         })
     }
@@ -357,19 +360,25 @@ impl Estimator {
 
     /// The result of a frame: the fit's pose, its labels and the person's pixels at the
     /// input's size, the joints' confidence.
+    /// `rendered`: the body's part labels rendered at the fit's pose, when a caller has
+    /// them already (else rendered here). The fit's labels at the working resolution
+    /// stay in `frame.labels`.
     pub(crate) fn result(
         &self,
-        frame: &Frame,
+        frame: &mut Frame,
         fit: FitResult,
         discrepancy: f64,
         source: Source,
         clock: Clock,
+        rendered: Option<Vec<i16>>,
     ) -> PoseResult {
         let camera = &self.resolution.working;
-        let (_, rendered) = self.model.render_depth(&fit.pose, camera);
+        let rendered = rendered.unwrap_or_else(|| self.model.render_depth(&fit.pose, camera).1);
         let confidence = joint_confidence(&fit.joints, &fit.labels, &rendered, camera);
         let labels = self.resolution.upsample(&fit.labels, -1);
         let mask = self.resolution.upsample(&frame.mask, false);
+        let converged = fit.converged();
+        frame.labels = fit.labels;
         PoseResult {
             pose: fit.pose,
             joints: fit.joints,
@@ -378,7 +387,7 @@ impl Estimator {
             mask,
             energy: fit.energy,
             iterations: fit.iterations,
-            converged: fit.converged(),
+            converged,
             confidence,
             timings: clock.finish(),
             source,
@@ -392,10 +401,12 @@ impl Estimator {
         }
     }
 
-    /// The discrepancy of one pose, from one rendering.
-    pub(crate) fn discrepancy(&self, frame: &Frame, pose: &Pose) -> f64 {
-        let (rendered, _) = self.model.render_depth(pose, &self.resolution.working);
-        depth_discrepancy(&rendered, &frame.depth, &frame.mask, DISCREPANCY_CAP)
+    /// The discrepancy of one pose, from one rendering, and the rendering's part labels
+    /// (for [`Self::result`]).
+    pub(crate) fn discrepancy(&self, frame: &Frame, pose: &Pose) -> (f64, Vec<i16>) {
+        let (rendered, labels) = self.model.render_depth(pose, &self.resolution.working);
+        let score = depth_discrepancy(&rendered, &frame.depth, &frame.mask, DISCREPANCY_CAP);
+        (score, labels)
     }
 }
 

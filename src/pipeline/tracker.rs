@@ -157,9 +157,9 @@ impl Tracker {
                     self.estimator
                         .search(&mut frame, &[], n, true, Some(&mut clock))?;
                 clock.lap("fit");
-                let res = self
-                    .estimator
-                    .result(&frame, best, score, Source::Templates, clock);
+                let res =
+                    self.estimator
+                        .result(&mut frame, best, score, Source::Templates, clock, None);
                 (res, frame, true)
             }
             Some(_) => self.tracked(depth, mask)?,
@@ -181,7 +181,7 @@ impl Tracker {
             self.track.recent.push_back(res.discrepancy);
         }
         let mut res = res;
-        if self.calibrating() && !first && self.explains_enough(&frame, &res) {
+        if self.calibrating() && !first && self.explains_enough(&frame, &frame.labels) {
             self.collect(frame, &mut res);
         }
         Ok(res)
@@ -206,13 +206,20 @@ impl Tracker {
             .fits(&mut frame, &fit_config, &[pred], None, Some(&prior))?
             .pop()
             .expect("one fit");
-        let score = est.discrepancy(&frame, &fit.pose);
+        let (score, rendered) = est.discrepancy(&frame, &fit.pose);
         clock.lap("fit");
         let lost = self.lost(&frame, &fit.labels, score);
         self.track.since_check += 1;
         let recheck = cfg.recheck_every > 0 && self.track.since_check >= cfg.recheck_every;
         if !(lost || recheck) {
-            let res = est.result(&frame, fit, score, Source::Tracking, clock);
+            let res = est.result(
+                &mut frame,
+                fit,
+                score,
+                Source::Tracking,
+                clock,
+                Some(rendered),
+            );
             return Ok((res, frame, false));
         }
         self.track.since_check = 0;
@@ -234,11 +241,18 @@ impl Tracker {
         if switch {
             let best = est.label_all(&mut frame, best)?;
             clock.lap("search");
-            let res = est.result(&frame, best, best_score, Source::Templates, clock);
+            let res = est.result(&mut frame, best, best_score, Source::Templates, clock, None);
             Ok((res, frame, true))
         } else {
             clock.lap("search");
-            let res = est.result(&frame, fit, score, Source::Tracking, clock);
+            let res = est.result(
+                &mut frame,
+                fit,
+                score,
+                Source::Tracking,
+                clock,
+                Some(rendered),
+            );
             Ok((res, frame, false))
         }
     }
@@ -254,30 +268,17 @@ impl Tracker {
         BodyModel::clamp_pose(&pred)
     }
 
-    /// At least `min_inlier_share` of the person's pixels labelled as body.
-    fn explains_enough_labels(&self, frame: &Frame, labels: &[i16]) -> bool {
+    /// At least `min_inlier_share` of the person's pixels labelled as body (`labels`
+    /// at the working resolution).
+    fn explains_enough(&self, frame: &Frame, labels: &[i16]) -> bool {
         let n = frame.mask.iter().filter(|&&m| m).count();
         let inliers = labels.iter().filter(|&&l| l >= 0).count();
         n > 0 && inliers as f64 >= self.estimator.config().min_inlier_share * n as f64
     }
 
-    fn explains_enough(&self, frame: &Frame, res: &PoseResult) -> bool {
-        // The result's labels are at the input's size; count at the working size.
-        let r = self.estimator.resolution();
-        if r.factor == 1 {
-            return self.explains_enough_labels(frame, &res.labels);
-        }
-        let (f, w) = (r.factor, r.input.width);
-        let ww = r.working.width;
-        let labels: Vec<i16> = (0..frame.mask.len())
-            .map(|k| res.labels[(k / ww) * f * w + (k % ww) * f])
-            .collect();
-        self.explains_enough_labels(frame, &labels)
-    }
-
     fn lost(&self, frame: &Frame, labels: &[i16], score: f64) -> bool {
         let cfg = self.estimator.config();
-        if !self.explains_enough_labels(frame, labels) || score > cfg.lost_discrepancy {
+        if !self.explains_enough(frame, labels) || score > cfg.lost_discrepancy {
             return true;
         }
         let recent = &self.track.recent;

@@ -181,8 +181,7 @@ pub fn segment_person(
         }));
     }
     let previous = hint.map(|h| h.planes.as_slice()).unwrap_or(&[]);
-    let (planes, on_plane) =
-        planes::detect_planes(depth, camera, &usable, &config.planes, previous);
+    let (planes, on_plane) = planes::detect_planes(depth, &rays, &usable, &config.planes, previous);
     let candidate: Vec<bool> = usable
         .iter()
         .zip(&on_plane)

@@ -198,16 +198,16 @@ impl Rng {
 /// plane at all (a reading in range). `previous` planes (a video's last frame) are tried
 /// first: each is refitted and kept while it still covers `min_area`; the search for
 /// new planes then runs on what they leave. Hypotheses, refits and areas use the sample
-/// grid; one pass over every pixel then marks the planes' pixels.
-pub fn detect_planes(
+/// grid; one pass over every pixel then marks the planes' pixels. `rays`: the
+/// camera's rays for this image ([`Rays::new`]).
+pub(crate) fn detect_planes(
     depth: &DepthView,
-    camera: &Camera,
+    rays: &Rays,
     usable: &[bool],
     config: &PlaneConfig,
     previous: &[Plane],
 ) -> (Vec<Plane>, Vec<bool>) {
     let (w, h) = (depth.width, depth.height);
-    let rays = Rays::new(camera, w, h);
     let valid = usable.iter().filter(|&&u| u).count();
     let mut planes: Vec<Plane> = Vec::new();
     if valid < 3 || config.max_planes == 0 {
@@ -265,7 +265,7 @@ pub fn detect_planes(
         }
         planes.push(plane);
     }
-    let on_plane = mark_pixels(depth, &rays, usable, &mut planes, config);
+    let on_plane = mark_pixels(depth, rays, usable, &mut planes, config);
     (planes, on_plane)
 }
 
