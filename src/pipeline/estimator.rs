@@ -203,8 +203,9 @@ impl Estimator {
             .collect()
     }
 
-    /// How badly each of `poses` explains the frame's depth (rendered in parallel).
-    pub(crate) fn discrepancies(&self, frame: &Frame, poses: &[Pose]) -> Result<Vec<f64>> {
+    /// How badly each of `poses` explains a prepared frame's depth, rendered in parallel
+    /// (see [`crate::render::depth_discrepancy`]).
+    pub fn discrepancies(&self, frame: &Frame, poses: &[Pose]) -> Result<Vec<f64>> {
         self.model.depth_discrepancies(
             poses,
             &self.resolution.working,
@@ -212,12 +213,6 @@ impl Estimator {
             &frame.mask,
             DISCREPANCY_CAP,
         )
-    }
-
-    /// How badly each of `poses` explains a prepared frame (see
-    /// [`crate::render::depth_discrepancy`]).
-    pub fn discrepancies_of(&self, frame: &Frame, poses: &[Pose]) -> Result<Vec<f64>> {
-        self.discrepancies(frame, poses)
     }
 
     /// [`Self::discrepancies`] plus the rest-pose penalty: how poses compete.

@@ -497,7 +497,7 @@ impl PyPoseEstimator {
         let a = frame_args(self.inner.camera(), depth, mask)?;
         let v = native(py, || -> crate::Result<Vec<f64>> {
             let frame = self.inner.prepare(&a.depth, a.mask.as_deref(), None)?;
-            self.inner.discrepancies_of(&frame, &poses)
+            self.inner.discrepancies(&frame, &poses)
         })?;
         let n = v.len();
         to_numpy(py, v, &[n])
