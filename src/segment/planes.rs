@@ -20,7 +20,7 @@ use crate::camera::Camera;
 use crate::cloud::DepthView;
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
 
-/// Settings of [`detect_planes`].
+/// Settings of the support-plane search (see the module docs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlaneConfig {
     /// Sample pixels the hypotheses are drawn from and scored on (a regular grid).
