@@ -60,7 +60,8 @@ from .fit import (
     pose_from_joints,
 )
 from .io import read_depth, read_image, write_depth
-from .pipeline import PipelineConfig, PoseEstimator, PoseResult, PoseTracker, estimate_stereo
+from .pipeline import PipelineConfig, PoseEstimator, PoseResult, PoseTracker
+from .stereo_pose import StereoPoseEstimator, StereoPoseTracker, estimate_stereo
 from .templates import Candidate, TemplateDatabase, surface_context
 
 __all__ = [
@@ -70,6 +71,8 @@ __all__ = [
     "PoseResult",
     "PoseTracker",
     "estimate_stereo",
+    "StereoPoseEstimator",
+    "StereoPoseTracker",
     "graphcut",
     "stereo",
     "synth",

@@ -1,6 +1,6 @@
-"""The whole pipeline: :class:`PoseEstimator` (a frame from scratch), :class:`PoseTracker`
-(a video), :func:`estimate_frames` (a sequence) and :func:`estimate_stereo` (a
-rectified pair).
+"""The whole pipeline on depth images: :class:`PoseEstimator` (a frame from scratch),
+:class:`PoseTracker` (a video) and :func:`estimate_frames` (a sequence). Stereo pairs
+go through :mod:`depthpose.stereo_pose`.
 
 Each ``estimate`` and ``update`` is one call into the native core, which finds the
 person, searches the templates, fits the body and returns a :class:`PoseResult`; the
@@ -40,7 +40,6 @@ __all__ = [
     "PoseResult",
     "PoseTracker",
     "estimate_frames",
-    "estimate_stereo",
     "mirror_view",
     "rest_pose_penalty",
     "swap_limbs",
@@ -372,57 +371,3 @@ def estimate_frames(
         out.shape_factors = tracker.shape_factors
         out.calibration_error = tracker.calibration_error
     return out
-
-
-def estimate_stereo(
-    left: np.ndarray,
-    right: np.ndarray,
-    camera: Camera,
-    baseline: float,
-    *,
-    doffs: float = 0.0,
-    estimator: PoseEstimator | None = None,
-    max_disparity: int | None = None,
-    background: np.ndarray | None = None,
-    mask: np.ndarray | None = None,
-) -> PoseResult:
-    """The paper's real-data path: a rectified pair → GCS disparity → depth → pose.
-
-    ``camera`` is the left camera (its fx is the focal length in pixels); ``baseline`` in
-    metres; ``doffs`` the principal-point offset between the cameras (Middlebury style).
-    ``background`` is the empty scene's depth (H, W) in metres, e.g. the depth of a pair
-    taken without the person; ``mask`` gives the person's pixels directly. Without
-    either, the person is found automatically. The result's ``timings`` has the
-    stereo matching's time under ``stereo``.
-    """
-    from . import stereo
-
-    if not isinstance(camera, Camera):
-        raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(camera).__name__}")
-    number = isinstance(baseline, (int, float, np.integer, np.floating))
-    if isinstance(baseline, bool) or not number:
-        raise InvalidTypeError(
-            f"baseline: expected a number of metres, got {_validate.type_name(baseline)}"
-        )
-    if not (np.isfinite(baseline) and baseline > 0):
-        raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
-    if mask is not None and background is not None:
-        raise InvalidInputError("mask: give either mask or background, not both")
-    t0 = time.perf_counter()
-    disparity = stereo.match(left, right, max_disparity=max_disparity)
-    depth = stereo.depth_from_disparity(disparity, camera.fx, float(baseline), doffs)
-    depth = np.ascontiguousarray(depth, np.float32)
-    if depth.shape != camera.shape:
-        raise InvalidInputError(
-            f"left: image is {depth.shape[1]}x{depth.shape[0]}, camera is "
-            f"{camera.width}x{camera.height}"
-        )
-    t_stereo = 1000 * (time.perf_counter() - t0)
-    est = estimator or PoseEstimator(camera)
-    if background is not None:
-        mask = _core.foreground_mask(depth, np.ascontiguousarray(background, np.float32))
-    elif mask is not None:
-        mask = np.asarray(mask)
-        if mask.shape != depth.shape:
-            raise InvalidInputError(f"mask: expected shape {depth.shape}, got {mask.shape}")
-    return est.estimate(depth, mask).with_stereo_time(t_stereo)

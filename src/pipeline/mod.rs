@@ -1,5 +1,6 @@
 //! The whole pipeline, one native call per frame: [`Estimator`] finds the pose of a
-//! frame from scratch, [`Tracker`] follows it through a video.
+//! frame from scratch, [`Tracker`] follows it through a video, [`StereoPipeline`] does
+//! either on rectified stereo pairs.
 //!
 //! A frame is brought to the working resolution ([`resolution`]), the person's pixels
 //! are found ([`crate::segment`]), start poses come from the template search
@@ -14,12 +15,14 @@ pub mod hypotheses;
 pub mod orientation;
 pub mod resolution;
 pub mod result;
+pub mod stereo;
 pub mod tracker;
 
 pub use config::PipelineConfig;
 pub use estimator::Estimator;
 pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs, turn_around};
 pub use result::{PoseResult, SegmentSummary, Source, Timings};
+pub use stereo::{StereoDepth, StereoDepthConfig, StereoPipeline, StereoPose, StereoRig};
 pub use tracker::Tracker;
 
 #[cfg(test)]

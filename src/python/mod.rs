@@ -17,6 +17,7 @@ mod io;
 mod pipeline;
 mod segment;
 mod stereo;
+mod stereo_pose;
 mod templates;
 
 use crate::error::Error;
@@ -195,6 +196,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     segment::register(m)?;
     pipeline::register(m)?;
     stereo::register(m)?;
+    stereo_pose::register(m)?;
     templates::register(m)?;
     Ok(())
 }

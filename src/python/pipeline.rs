@@ -212,8 +212,8 @@ fn fit_config_of(value: &Bound<PyAny>) -> PyResult<crate::fit::FitConfig> {
 /// The pose of one frame.
 #[pyclass(name = "PoseResult", module = "depthpose._core", frozen)]
 pub struct PyPoseResult {
-    inner: PoseResult,
-    shape: [usize; 2],
+    pub(super) inner: PoseResult,
+    pub(super) shape: [usize; 2],
 }
 
 #[pymethods]
@@ -318,22 +318,6 @@ impl PyPoseResult {
             .unwrap_or_default()
     }
 
-    /// This result with the stereo matching that made its depth (`ms` milliseconds)
-    /// added to its timings, first, and to the total.
-    fn with_stereo_time(&self, ms: Real) -> PyResult<Self> {
-        let ms = ms.get("ms")?;
-        if !(ms.is_finite() && ms >= 0.0) {
-            return Err(Error::invalid("ms", format!("must be finite and >= 0, got {ms}")).into());
-        }
-        let mut inner = self.inner.clone();
-        inner.timings.stages.insert(0, ("stereo", ms));
-        inner.timings.total += ms;
-        Ok(PyPoseResult {
-            inner,
-            shape: self.shape,
-        })
-    }
-
     /// JSON-ready (labels and mask left out; they are images).
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let r = &self.inner;
@@ -375,45 +359,75 @@ impl PyPoseResult {
 }
 
 /// The arguments both native classes are made from, as Python passes them.
-struct EstimatorArgs<'a, 'py> {
-    camera: &'a Bound<'py, PyAny>,
-    templates: &'a Bound<'py, PyAny>,
-    model: Option<&'a Bound<'py, PyAny>>,
-    config: Option<&'a Bound<'py, PyAny>>,
-    background: Option<&'a Bound<'py, PyAny>>,
+pub(super) struct EstimatorArgs<'a, 'py> {
+    pub camera: &'a Bound<'py, PyAny>,
+    pub templates: &'a Bound<'py, PyAny>,
+    pub model: Option<&'a Bound<'py, PyAny>>,
+    pub config: Option<&'a Bound<'py, PyAny>>,
+    pub background: Option<&'a Bound<'py, PyAny>>,
 }
 
-/// The parts of an estimator both native classes are made from.
+/// An estimator's parts, converted: camera, templates, model and config.
+pub(super) struct EstimatorParts {
+    pub camera: crate::camera::Camera,
+    pub templates: std::sync::Arc<crate::templates::TemplateDatabase>,
+    pub model: BodyModel,
+    pub config: PipelineConfig,
+}
+
+impl EstimatorParts {
+    pub fn of(a: &EstimatorArgs) -> PyResult<Self> {
+        let camera = camera_arg(a.camera, "camera")?;
+        let templates =
+            object::<PyTemplateDatabase>(a.templates, "templates", "a native template database")?
+                .shared();
+        let model = match a.model {
+            None => BodyModel::default(),
+            Some(m) => object::<PyBodyModel>(m, "model", "a depthpose.BodyModel or None")?
+                .inner
+                .clone(),
+        };
+        let config = match a.config {
+            None => PipelineConfig::default(),
+            Some(c) => {
+                object::<PyPipelineConfig>(c, "config", "a depthpose.PipelineConfig or None")?
+                    .inner
+                    .clone()
+            }
+        };
+        Ok(EstimatorParts {
+            camera,
+            templates,
+            model,
+            config,
+        })
+    }
+
+    /// The estimator, with `background` (metres, the camera's size) when given.
+    pub fn estimator(self, background: Option<&[f32]>) -> PyResult<Estimator> {
+        Ok(Estimator::new(
+            &self.camera,
+            self.model,
+            self.templates,
+            self.config,
+            background,
+        )?)
+    }
+}
+
+/// The estimator both native depth classes are made from.
 fn estimator_of(a: &EstimatorArgs) -> PyResult<Estimator> {
-    let camera = camera_arg(a.camera, "camera")?;
-    let templates =
-        object::<PyTemplateDatabase>(a.templates, "templates", "a native template database")?;
-    let model = match a.model {
-        None => BodyModel::default(),
-        Some(m) => object::<PyBodyModel>(m, "model", "a depthpose.BodyModel or None")?
-            .inner
-            .clone(),
-    };
-    let config = match a.config {
-        None => PipelineConfig::default(),
-        Some(c) => object::<PyPipelineConfig>(c, "config", "a depthpose.PipelineConfig or None")?
-            .inner
-            .clone(),
-    };
+    let parts = EstimatorParts::of(a)?;
     let bg = a
         .background
         .map(|b| depth_array(b, "background"))
         .transpose()?;
     if let Some(b) = &bg {
-        camera.check_image("background", b.shape[0], b.shape[1])?;
+        parts
+            .camera
+            .check_image("background", b.shape[0], b.shape[1])?;
     }
-    Ok(Estimator::new(
-        &camera,
-        model,
-        templates.shared(),
-        config,
-        bg.as_ref().map(|b| b.data.as_slice()),
-    )?)
+    parts.estimator(bg.as_ref().map(|b| b.data.as_slice()))
 }
 
 /// A frame's depth (metres), optional mask and (height, width), checked against the

@@ -15,7 +15,7 @@ type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
 
 /// A gray image (H, W) from a gray (H, W), (H, W, 1) or colour (H, W, 3|4) array of any
 /// numeric dtype; colour by luma, alpha ignored.
-fn gray_image(obj: &Bound<PyAny>, name: &str) -> PyResult<Arr<f32>> {
+pub(super) fn gray_image(obj: &Bound<PyAny>, name: &str) -> PyResult<Arr<f32>> {
     let a = image_f32(obj, name)?;
     match a.shape.as_slice() {
         [_, _] => Ok(a),

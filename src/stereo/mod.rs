@@ -10,9 +10,11 @@
 //! from the seeds with a priority queue and the uniqueness constraint, testing only
 //! d − 1, d, d + 1 for each 4-neighbour, (4) optional left–right check, (5) subpixel
 //! refinement by a parabola through the correlations at d − 1, d, d + 1, (6) optional
-//! removal of small disparity segments. Memory is O(W·H), never O(W·H·D).
+//! removal of small disparity segments. Memory is O(W·H), never O(W·H·D). [`fattening`]
+//! removes the band of background pixels a nearer surface's disparity spreads to.
 
 mod correlation;
+pub mod fattening;
 mod grow;
 
 pub use correlation::Similarity;

@@ -1,0 +1,330 @@
+//! Pose from a rectified stereo pair, the paper's own input: seed-growing stereo gives
+//! the disparity, the disparity gives depth, and the depth goes through the estimator
+//! or the tracker like a depth camera's frame.
+//!
+//! Depth from stereo differs from a depth camera's in three ways the pipeline accounts
+//! for:
+//! - **Fattening.** Window matching gives the background pixels along a silhouette the
+//!   person's disparity; those matches are removed before the depth is formed
+//!   ([`crate::stereo::fattening`]).
+//! - **Noise grows as Z².** A disparity error of δ pixels is a depth error of
+//!   Z²·δ/(f·B): at 4 m with a 0.12 m baseline and f = 570 px, a quarter of a metre per
+//!   pixel. The segmentation's plane and background tolerances are widened to the depth
+//!   that `disparity_tolerance` pixels span at each depth, so a floor matched within a
+//!   pixel is still recognised as a floor.
+//! - **Video.** The previous frame's matches seed the next frame's growing (on a grid),
+//!   so the person is matched from where it was even where random seeds miss it.
+//!
+//! The empty-scene pair is optional: when given, its depth is the background for
+//! background subtraction; without it the person is segmented automatically.
+
+use super::estimator::Estimator;
+use super::result::PoseResult;
+use super::tracker::Tracker;
+use crate::camera::Camera;
+use crate::error::{ensure, ensure_positive, Error, Result};
+use crate::segment::SegmentConfig;
+use crate::stereo::fattening::{remove_fattening, FatteningConfig};
+use crate::stereo::{depth_from_disparity, match_stereo_seeded, Seed, StereoConfig};
+use std::time::Instant;
+
+/// A rectified stereo rig whose left camera is the pipeline's camera.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StereoRig {
+    /// Distance between the camera centres, metres.
+    pub baseline: f64,
+    /// The x-offset of the right principal point from the left one, pixels (as
+    /// Middlebury's `doffs`; 0 for a pair rectified to a common principal point):
+    /// Z = B·f / (d + doffs).
+    pub doffs: f64,
+}
+
+impl StereoRig {
+    pub fn validate(&self) -> Result<()> {
+        ensure_positive(self.baseline, "baseline")?;
+        ensure(self.doffs.is_finite(), "doffs", || {
+            format!("must be finite, got {}", self.doffs)
+        })
+    }
+}
+
+/// Settings of the stereo stage.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StereoDepthConfig {
+    /// The matcher's settings.
+    pub matching: StereoConfig,
+    /// Removal of foreground fattening (None: keep every match).
+    pub fattening: Option<FatteningConfig>,
+    /// Disparity error (pixels) the segmentation tolerates on a plane or against the
+    /// background: the depth tolerances are widened to Z²·δ/(f·B) where that is larger.
+    pub disparity_tolerance: f32,
+    /// In a video, the previous frame's matches seed the next frame's on a grid of this
+    /// spacing in pixels (0: no seeds from the previous frame).
+    pub seed_spacing: usize,
+}
+
+impl Default for StereoDepthConfig {
+    fn default() -> Self {
+        let matching = StereoConfig::default();
+        StereoDepthConfig {
+            fattening: Some(FatteningConfig::for_window(matching.window)),
+            matching,
+            disparity_tolerance: 1.0,
+            seed_spacing: 8,
+        }
+    }
+}
+
+impl StereoDepthConfig {
+    pub fn validate(&self) -> Result<()> {
+        self.matching.validate()?;
+        if let Some(f) = &self.fattening {
+            f.validate()?;
+        }
+        ensure(
+            self.disparity_tolerance.is_finite() && self.disparity_tolerance >= 0.0,
+            "disparity_tolerance",
+            || format!("must be finite and >= 0, got {}", self.disparity_tolerance),
+        )
+    }
+}
+
+/// A pair's disparity (pixels, NaN unmatched) and depth (metres, 0 = none), the left
+/// image's size, and the time the stage took.
+#[derive(Debug, Clone)]
+pub struct StereoFrame {
+    pub disparity: Vec<f32>,
+    pub depth: Vec<f32>,
+    /// Milliseconds of matching, fattening removal and conversion.
+    pub ms: f64,
+}
+
+/// Depth from rectified pairs of one rig, remembering a video's last disparity.
+#[derive(Debug, Clone)]
+pub struct StereoDepth {
+    camera: Camera,
+    rig: StereoRig,
+    config: StereoDepthConfig,
+    previous: Option<Vec<f32>>,
+}
+
+impl StereoDepth {
+    pub fn new(camera: &Camera, rig: StereoRig, config: StereoDepthConfig) -> Result<Self> {
+        rig.validate()?;
+        config.validate()?;
+        Ok(StereoDepth {
+            camera: *camera,
+            rig,
+            config,
+            previous: None,
+        })
+    }
+
+    pub fn rig(&self) -> &StereoRig {
+        &self.rig
+    }
+
+    pub fn config(&self) -> &StereoDepthConfig {
+        &self.config
+    }
+
+    /// Forgets the previous frame's disparity.
+    pub fn reset(&mut self) {
+        self.previous = None;
+    }
+
+    /// `base` with the plane and background tolerances widened to this rig's depth
+    /// noise (module docs): the quadratic coefficients become at least δ/(f·B).
+    pub fn segment_config(&self, base: &SegmentConfig) -> SegmentConfig {
+        let quadratic =
+            (self.config.disparity_tolerance as f64 / (self.camera.fx * self.rig.baseline)) as f32;
+        let mut c = *base;
+        c.planes.tolerance_quadratic = c.planes.tolerance_quadratic.max(quadratic);
+        c.foreground.bg_tolerance_quadratic = c.foreground.bg_tolerance_quadratic.max(quadratic);
+        c
+    }
+
+    /// The disparity and depth of a gray pair (row-major, the camera's size, any
+    /// intensity scale). With `video`, the previous pair's matches seed this one and
+    /// this one's are kept for the next.
+    pub fn frame(&mut self, left: &[f32], right: &[f32], video: bool) -> Result<StereoFrame> {
+        let start = Instant::now();
+        let (h, w) = (self.camera.height, self.camera.width);
+        for (img, name) in [(left, "left"), (right, "right")] {
+            ensure(img.len() == h * w, name, || {
+                format!(
+                    "has {} pixels, the camera {}x{} has {}",
+                    img.len(),
+                    w,
+                    h,
+                    h * w
+                )
+            })?;
+        }
+        let seeds = match (&self.previous, video) {
+            (Some(prev), true) => grid_seeds(prev, h, w, self.config.seed_spacing),
+            _ => Vec::new(),
+        };
+        let matched = match_stereo_seeded(left, right, h, w, &self.config.matching, &seeds)?;
+        let mut disparity = matched.disparity;
+        if let Some(f) = &self.config.fattening {
+            remove_fattening(&mut disparity, h, w, f)?;
+        }
+        let depth = depth_from_disparity(
+            &disparity,
+            self.camera.fx,
+            self.rig.baseline,
+            self.rig.doffs,
+        )?;
+        if let Some(k) = depth.iter().position(|z| !z.is_finite()) {
+            return Err(Error::invalid(
+                "doffs",
+                format!(
+                    "the depth at row {}, column {} is beyond the float32 range",
+                    k / w,
+                    k % w
+                ),
+            ));
+        }
+        if video {
+            self.previous = Some(disparity.clone());
+        }
+        Ok(StereoFrame {
+            disparity,
+            depth,
+            ms: start.elapsed().as_secs_f64() * 1e3,
+        })
+    }
+}
+
+/// Seeds at every `spacing`-th pixel of a previous disparity where it has a match.
+fn grid_seeds(disparity: &[f32], height: usize, width: usize, spacing: usize) -> Vec<Seed> {
+    if spacing == 0 {
+        return Vec::new();
+    }
+    let mut seeds = Vec::new();
+    for y in (spacing / 2..height).step_by(spacing) {
+        for x in (spacing / 2..width).step_by(spacing) {
+            let d = disparity[y * width + x];
+            if d.is_finite() && d >= 0.0 && (d.round() as usize) <= x {
+                seeds.push(Seed {
+                    x,
+                    y,
+                    d: d.round() as usize,
+                });
+            }
+        }
+    }
+    seeds
+}
+
+/// What a stereo pipeline does with each pair's depth.
+#[derive(Debug, Clone)]
+enum Stage {
+    /// Each pair from scratch.
+    Estimate(Box<Estimator>),
+    /// A video.
+    Track(Box<Tracker>),
+}
+
+/// Pose from rectified pairs: one from scratch per pair, or tracked through a video.
+#[derive(Debug, Clone)]
+pub struct StereoPipeline {
+    stereo: StereoDepth,
+    stage: Stage,
+    /// The last pair's disparity.
+    disparity: Option<Vec<f32>>,
+}
+
+/// A stereo pipeline's pose of a pair and the pair's disparity.
+#[derive(Debug, Clone)]
+pub struct StereoPose {
+    /// The pose; its timings begin with the stereo stage (`stereo`).
+    pub result: PoseResult,
+    pub disparity: Vec<f32>,
+}
+
+impl StereoPipeline {
+    /// A pipeline for pairs of `stereo`'s rig, estimating each pair from scratch with
+    /// `estimator`, or tracking with `tracker`. The estimator's segmentation settings
+    /// should come from [`StereoDepth::segment_config`].
+    pub fn estimating(stereo: StereoDepth, estimator: Estimator) -> Self {
+        StereoPipeline {
+            stereo,
+            stage: Stage::Estimate(Box::new(estimator)),
+            disparity: None,
+        }
+    }
+
+    pub fn tracking(stereo: StereoDepth, tracker: Tracker) -> Self {
+        StereoPipeline {
+            stereo,
+            stage: Stage::Track(Box::new(tracker)),
+            disparity: None,
+        }
+    }
+
+    pub fn stereo(&self) -> &StereoDepth {
+        &self.stereo
+    }
+
+    pub fn estimator(&self) -> &Estimator {
+        match &self.stage {
+            Stage::Estimate(e) => e,
+            Stage::Track(t) => t.estimator(),
+        }
+    }
+
+    /// The tracker, when the pipeline tracks.
+    pub fn tracker(&self) -> Option<&Tracker> {
+        match &self.stage {
+            Stage::Estimate(_) => None,
+            Stage::Track(t) => Some(t),
+        }
+    }
+
+    /// The last pair's disparity (None before the first).
+    pub fn disparity(&self) -> Option<&[f32]> {
+        self.disparity.as_deref()
+    }
+
+    /// Forgets the video: the track (and the shape with `shape`) and the last disparity.
+    pub fn reset(&mut self, shape: bool) {
+        self.stereo.reset();
+        if let Stage::Track(t) = &mut self.stage {
+            t.reset(shape);
+        }
+    }
+
+    /// The pose of the next pair (gray, row-major, the camera's size; `mask` the
+    /// person's pixels in the left image, else segmented). A tracking pipeline forgets
+    /// its last disparity when a pair fails, like the track.
+    pub fn update(
+        &mut self,
+        left: &[f32],
+        right: &[f32],
+        mask: Option<&[bool]>,
+    ) -> Result<StereoPose> {
+        let video = matches!(self.stage, Stage::Track(_));
+        let frame = self.stereo.frame(left, right, video)?;
+        let result = match &mut self.stage {
+            Stage::Estimate(e) => e.estimate(&frame.depth, mask),
+            Stage::Track(t) => t.update(&frame.depth, mask),
+        };
+        let mut result = match result {
+            Ok(r) => r,
+            Err(e) => {
+                self.stereo.reset();
+                self.disparity = Some(frame.disparity);
+                return Err(e);
+            }
+        };
+        result.timings.stages.insert(0, ("stereo", frame.ms));
+        result.timings.total += frame.ms;
+        self.disparity = Some(frame.disparity.clone());
+        Ok(StereoPose {
+            result,
+            disparity: frame.disparity,
+        })
+    }
+}
