@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import time
 from collections.abc import Callable
 from collections.abc import Sequence as Seq
@@ -196,23 +195,17 @@ def _merge(out_dir: Path, name: str, n_frames: int, ranges, failed_chunks: dict)
 
 
 class _Progress:
-    """A text progress bar over frames on stderr (quiet when not a terminal or CI)."""
+    """A progress bar over frames on stderr (tqdm; none when not a terminal)."""
 
     def __init__(self, total: int, enabled: bool) -> None:
-        self.total, self.done, self.t0 = total, 0, time.perf_counter()
-        self.enabled = enabled and total > 0
+        from ._progress import progress_bar
+
+        self.bar = progress_bar(total, "frames", enabled=enabled and total > 0)
 
     def add(self, n: int) -> None:
-        self.done += n
-        if not self.enabled:
-            return
-        frac = self.done / self.total
-        rate = self.done / max(time.perf_counter() - self.t0, 1e-9)
-        bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r[{bar:<30}] {self.done}/{self.total} frames {rate:6.1f}/s")
-        if self.done >= self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        self.bar.update(n)
+        if self.bar.n >= (self.bar.total or 0):
+            self.bar.close()
 
 
 def run(
