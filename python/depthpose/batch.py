@@ -219,6 +219,7 @@ def run(
     overlap: int = 4,
     track: bool = True,
     intrinsics: Seq[float] | None = None,
+    camera: Any = None,
     depth_scale: float = 0.001,
     templates: str | os.PathLike[str] | None = None,
     progress: bool = True,
@@ -229,7 +230,10 @@ def run(
     ``client``: a ``distributed.Client`` to use; else ``scheduler`` (``tcp://host:port``)
     to connect to; else a local cluster of ``n_workers`` processes (one per core) on
     loopback. ``templates``: a saved template database shared by all workers (default:
-    the cached default database, built once here if needed).
+    the cached default database, built once here if needed). ``camera``: a ``Camera``
+    (or a function of the frames' shape (H, W) returning one) instead of ``intrinsics``,
+    as :func:`depthpose.sequence.open_sequence` takes it. ``depth_scale``: metres per
+    integer unit.
     """
     try:
         from distributed import Client, LocalCluster, as_completed
@@ -246,7 +250,9 @@ def run(
     seqs = []
     for p in expand_inputs([os.fspath(i) for i in inputs]):
         try:
-            seqs.append(open_sequence(p, intrinsics=intrinsics, depth_scale=depth_scale))
+            seqs.append(
+                open_sequence(p, intrinsics=intrinsics, depth_scale=depth_scale, camera=camera)
+            )
         except DepthPoseError as e:
             name = p.stem if p.suffix else p.name
             summary.failed_sequences.append(name)
@@ -282,7 +288,13 @@ def run(
                     stop=stop,
                     overlap=overlap,
                     track=track,
-                    intrinsics=None if intrinsics is None else list(intrinsics),
+                    intrinsics=(
+                        list(seq.camera.intrinsics)
+                        if camera is not None
+                        else None
+                        if intrinsics is None
+                        else list(intrinsics)
+                    ),
                     depth_scale=depth_scale,
                     templates=os.fspath(templates),
                     out=os.fspath(path),

@@ -204,11 +204,14 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from .batch import run
 
+    if args.camera is not None and args.intrinsics is not None:
+        raise InvalidInputError("--camera: give either --camera or --intrinsics, not both")
+    camera = (lambda shape: _preset(args.camera, shape, "the frames")) if args.camera else None
     summary = run(
         args.inputs, args.out, scheduler=args.scheduler, n_workers=args.workers,
         chunk_frames=args.chunk_frames, overlap=args.overlap, track=args.track,
-        intrinsics=args.intrinsics, depth_scale=_metres_per_unit(args.depth_scale),
-        templates=args.templates,
+        intrinsics=args.intrinsics, camera=camera,
+        depth_scale=_metres_per_unit(args.depth_scale), templates=args.templates,
     )  # fmt: skip
     print(summary.report())
     return 0 if summary.failed_frames == 0 and not summary.failed_sequences else 1
@@ -308,8 +311,7 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--chunk-frames", type=int, default=32)
     bat.add_argument("--overlap", type=int, default=4, help="warm-up frames per chunk")
     bat.add_argument("--track", action=argparse.BooleanOptionalAction, default=True)
-    bat.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
-    bat.add_argument("--depth-scale", type=float, default=1000.0, help=_DEPTH_SCALE_HELP)
+    _camera_args(bat)
     bat.add_argument("--templates", help="a saved template database to share")
     bat.set_defaults(func=_cmd_batch)
 

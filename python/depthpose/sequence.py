@@ -174,12 +174,13 @@ def open_sequence(
 ) -> Sequence:
     """Opens a .npz (keys ``depth`` (T, H, W), ``intrinsics``, optional ``background``,
     ``joints``, ``fps``), a folder of depth frames (sorted by name; its size is that of
-    most of the first three frames that can be read) or one depth image. ``depth_scale``: metres per
-    integer unit, in [1e-6, 1] (the readers' ``scale``; the CLI's ``--depth-scale``
-    counts units per metre instead). ``camera``: a :class:`Camera` (or a function of the
-    image shape (H, W) returning one) instead of ``intrinsics``. ``pattern``: for a
-    folder, a glob of the frame files to read (default: every depth-image suffix); a
-    matched file that is not a depth image is a failed frame, not a failed sequence."""
+    most of its first three readable frames) or one depth image. ``depth_scale``:
+    metres per integer unit, in [1e-6, 1] (the readers' ``scale``; the CLI's
+    ``--depth-scale`` counts units per metre instead). ``camera``: a :class:`Camera`
+    (or a function of the image shape (H, W) returning one) instead of ``intrinsics``.
+    ``pattern``: for a folder, a glob of the frame files to read (default: every
+    depth-image suffix); a matched file that is not a depth image is a failed frame,
+    not a failed sequence."""
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
     scale = _validate.number(depth_scale, "depth_scale", low=MIN_DEPTH_SCALE, high=MAX_DEPTH_SCALE)
