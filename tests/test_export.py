@@ -117,7 +117,10 @@ def test_bvh_round_trips_through_bvhio(tmp_path):
     ends = [ln.split()[1:] for k, ln in enumerate(text.splitlines())
             if "OFFSET" in ln and "End Site" in text.splitlines()[k - 2]]  # fmt: skip
     assert len(ends) == 5  # head, hands, feet
-    assert all(np.linalg.norm(np.array(e, float)) > 0.03 for e in ends)
+    head, r_hand, l_hand, r_foot, l_foot = np.array(ends, float)  # in the file's order
+    assert head[1] > 0.03  # the top of the head
+    assert r_hand[1] < -0.1 and l_hand[1] < -0.1  # the finger tips, down the arm
+    assert r_foot[2] > 0.05 and l_foot[2] > 0.05  # the toes, forward
     root = bvhio.readAsHierarchy(str(path))
     joints = {j.Name: j for j, _, _ in root.layout()}
     index = {export.BVH_NAMES[n]: k for k, n in enumerate(model.part_names)}

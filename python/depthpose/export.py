@@ -122,21 +122,30 @@ def _rot(axis: str, deg: float) -> np.ndarray:
 
 
 def _end_sites(model, names: list[str]) -> dict[str, np.ndarray]:
-    """The End Site offset of each segment at the rest pose, y-up: from the segment's
-    proximal joint through its ellipsoid's centre to where that line leaves the
-    ellipsoid (the top of the head, the tips of the hands and feet)."""
+    """The End Site offset of each segment at the rest pose, y-up: where a ray from the
+    segment's joint leaves its ellipsoid (the top of the head, the tips of the hands and
+    feet). The ray runs through the ellipsoid's centre when that lies ahead along the
+    chain, else straight on along the chain (the head, centred near its joint)."""
     rest = np.zeros(22)
     frames = np.asarray(model.segment_transforms(rest))
     centres, rotations, radii = (np.asarray(a) for a in model.ellipsoids(rest))
     out = {}
     for k, n in enumerate(names):
         origin = frames[k, :3, 3]
+        parent = BVH_PARENTS[n]
+        chain = origin - frames[names.index(parent), :3, 3] if parent else np.zeros(3)
         d = centres[k] - origin
-        if np.linalg.norm(d) < 1e-6:  # centred on its joint: along the segment's long axis
+        if d @ chain <= 0 and np.linalg.norm(chain) > 1e-9:
+            d = chain
+        if np.linalg.norm(d) < 1e-9:  # a lone segment centred on its joint: its long axis
             d = rotations[k][:, int(np.argmax(radii[k]))]
         d = d / np.linalg.norm(d)
-        reach = 1.0 / float(np.linalg.norm((rotations[k].T @ d) / radii[k]))
-        out[n] = _FLIP @ (centres[k] + reach * d - origin)
+        # |A (origin + t d - centre)| = 1 with A mapping the ellipsoid to the unit sphere.
+        to_unit = rotations[k].T / radii[k][:, None]
+        a, b = to_unit @ d, to_unit @ (origin - centres[k])
+        disc = (a @ b) ** 2 - (a @ a) * (b @ b - 1.0)
+        t = (-(a @ b) + np.sqrt(max(disc, 0.0))) / (a @ a)
+        out[n] = _FLIP @ (max(t, 0.0) * d)
     return out
 
 
