@@ -64,7 +64,7 @@ def _metres_per_unit(depth_scale: float) -> float:
 
 def _preset(name: str | None, shape: tuple[int, int], what: str):
     """The camera preset ``name`` for images of ``shape`` (H, W): the preset itself, or
-    the preset resampled when the images are a whole fraction or multiple of its size."""
+    the preset resampled when the images have its aspect ratio at another size."""
     from . import Camera
 
     if name is None:
@@ -245,8 +245,8 @@ def _presets() -> list[str]:
 
 
 _CAMERA_HELP = (
-    "a sensor's intrinsics by name: " + ", ".join(_presets()) + " (resampled when the "
-    "images are a whole fraction of its size)"
+    "a sensor's intrinsics by name: " + ", ".join(_presets()) + " (resampled to images "
+    "of another size with its aspect ratio, such as a Kinect v1's at 320x240)"
 )
 
 
