@@ -3,11 +3,21 @@
 //! Camera frame: x right, y down, z forward (metres). Pixel (row v, column u) is centred
 //! at (u, v) and a point p projects to u = fx·x/z + cx, v = fy·y/z + cy.
 
-use crate::error::{ensure, ensure_positive, Result};
+use crate::error::{ensure, ensure_positive, Error, Result};
 use nalgebra::Vector3;
 
 /// Focal length per pixel of image width of [`Camera::nominal`].
 pub const NOMINAL_FOCAL_PER_WIDTH: f64 = 0.9;
+
+/// Names of the sensors [`Camera::preset`] knows.
+pub const PRESETS: &[&str] = &[
+    "kinect-v1",
+    "kinect-v1-qvga",
+    "kinect-v2",
+    "azure-kinect",
+    "realsense-d435",
+    "itop",
+];
 
 /// Pinhole intrinsics plus the image size they belong to.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,7 +81,51 @@ impl Camera {
         )
     }
 
-    /// Kinect v1 depth camera at 640×480 (f ≈ 580 px).
+    /// The camera of a common depth sensor by name (one of [`PRESETS`]; case and `_`
+    /// versus `-` do not matter). These are nominal intrinsics: a device's own
+    /// calibration differs by a few pixels, and is better when you have it.
+    pub fn preset(name: &str) -> Result<Self> {
+        let key = name.trim().to_ascii_lowercase().replace('_', "-");
+        let pinhole = |f: f64, cx: f64, cy: f64, width: usize, height: usize| Camera {
+            fx: f,
+            fy: f,
+            cx,
+            cy,
+            width,
+            height,
+        };
+        Ok(match key.as_str() {
+            "kinect-v1" => Camera::kinect_v1(),
+            "kinect-v1-qvga" => Camera::kinect_v1_qvga(),
+            // The depth (IR) camera at 512×424; the factory intrinsics libfreenect2 reads
+            // from two devices are f = 368.1 and 365.4 px, principal point (261, 203–206)
+            // (github.com/OpenKinect/libfreenect2/issues/41).
+            "kinect-v2" => pinhole(365.4, 260.9, 205.6, 512, 424),
+            // Depth mode NFOV unbinned, 640×576: the factory calibration the Azure Kinect
+            // SDK reports (k4a_calibration_t, depth camera) is f ≈ 504 px with the
+            // principal point within a few pixels of the centre.
+            "azure-kinect" => pinhole(504.0, 319.5, 287.5, 640, 576),
+            // The depth stream at 640×480: `rs-enumerate-devices -c` reports f = 384.2 px,
+            // principal point (319.5, 236.4), 79.6°×64.0° (github.com/realsenseai/
+            // realsense-ros/issues/2788). At 848×480 and 1280×720 f is about 424 and 640 px.
+            "realsense-d435" => pinhole(384.2, 319.5, 236.4, 640, 480),
+            "itop" => Camera::itop(),
+            _ => {
+                return Err(Error::invalid(
+                    "name",
+                    format!(
+                        "unknown camera preset {name:?}; the presets are {}",
+                        PRESETS.join(", ")
+                    ),
+                ))
+            }
+        })
+    }
+
+    /// Kinect v1 depth camera at 640×480. f = 580 px: the IR camera's calibrated focal
+    /// length (Burrus' Kinect calibration gives 594/591 px, the OpenNI driver assumes
+    /// 575.8 px); 525 px, which the TUM RGB-D benchmark uses, is the colour camera's, for
+    /// depth registered to colour.
     pub fn kinect_v1() -> Self {
         Camera {
             fx: 580.0,
@@ -179,6 +233,21 @@ mod tests {
         assert!(Camera::new(500.0, 500.0, 5000.0, 1.0, 10, 10).is_err());
         let e = Camera::new(500.0, 500.0, 5.0, -100.0, 10, 10).unwrap_err();
         assert!(e.to_string().starts_with("cy:"));
+    }
+
+    #[test]
+    fn presets_by_name() {
+        for name in PRESETS {
+            let cam = Camera::preset(name).unwrap();
+            let ok = Camera::new(cam.fx, cam.fy, cam.cx, cam.cy, cam.width, cam.height);
+            assert_eq!(ok.unwrap(), cam, "{name}");
+        }
+        assert_eq!(Camera::preset("Kinect_V1").unwrap(), Camera::kinect_v1());
+        assert_eq!(Camera::preset("itop").unwrap(), Camera::itop());
+        let d435 = Camera::preset("realsense-d435").unwrap();
+        assert_eq!((d435.width, d435.height), (640, 480));
+        let e = Camera::preset("kinect-v3").unwrap_err().to_string();
+        assert!(e.starts_with("name:") && e.contains("azure-kinect"), "{e}");
     }
 
     #[test]

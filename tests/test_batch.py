@@ -96,3 +96,22 @@ def test_corrupt_input_and_nan_frame_are_recorded(tmp_path, inputs, client):
     log = [json.loads(x) for x in (out / "holes.log.jsonl").read_text().splitlines()]
     assert log[0]["frame"] == 2 and "NoBody" in log[0]["error"]
     assert np.isfinite(np.load(out / "wave.npz")["joints"]).all()
+
+
+def test_batch_takes_a_camera_preset(tmp_path, inputs, client):
+    """A folder of frames with a camera preset instead of intrinsics, through the CLI's
+    --camera; the preset reaches every worker."""
+    from depthpose.cli import main
+    from depthpose.sequence import open_sequence
+
+    seq = open_sequence(inputs[0])
+    folder = tmp_path / "frames"
+    folder.mkdir()
+    for k, d in enumerate(seq.frames(0, 4)):
+        dp.write_depth(folder / f"f{k:03d}.png", d)
+    s = batch.run([folder], tmp_path / "out", client=client, chunk_frames=2, overlap=1,
+                  camera=dp.Camera.preset("itop"), progress=False)  # fmt: skip
+    assert s.failed_frames == 0 and not s.failed_sequences, s.report()
+    assert np.isfinite(np.load(tmp_path / "out" / "frames.npz")["joints"]).all()
+    with pytest.raises(SystemExit):
+        main(["batch", str(folder), "--out", str(tmp_path / "o"), "--camera", "nope"])

@@ -104,7 +104,7 @@ def test_bad_arguments_exit_2_with_a_message(tmp_path, frames, capsys):
     for args in (["--depth-scale", "1e9"], ["--depth-scale", "0"]):
         rc = main(["estimate", str(folder), "--out", str(tmp_path / "p.npz"),
                    "--intrinsics", *intr, *args])  # fmt: skip
-        assert rc == 2 and "depth_scale" in capsys.readouterr().err
+        assert rc == 2 and "--depth-scale" in capsys.readouterr().err
     rc = main(["estimate", str(tmp_path / "nowhere"), "--out", str(tmp_path / "p.npz")])
     assert rc == 2 and "no such file" in capsys.readouterr().err
 

@@ -185,10 +185,22 @@ def test_default_is_cached(tmp_path, monkeypatch):
     assert files[0].stat().st_mtime_ns == mtime
 
 
-def test_progress_bar(capsys):
+def test_progress_bar(capsys, monkeypatch):
+    """The bar is drawn on a terminal, and never into a file or pipe."""
+    import io
+    import sys
+
     TemplateDatabase.build(progress=True, samples=20)
-    err = capsys.readouterr().err
-    assert "768/768" in err
+    assert capsys.readouterr().err == ""  # pytest's stderr is not a terminal
+
+    class Terminal(io.StringIO):
+        def isatty(self) -> bool:
+            return True
+
+    terminal = Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    TemplateDatabase.build(progress=True, samples=20)
+    assert "768/768" in terminal.getvalue()
 
 
 @pytest.mark.skipif(not SYNTH.is_dir(), reason="shared synthetic data not found")

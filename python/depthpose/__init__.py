@@ -21,7 +21,7 @@ Nothing panics, aborts or hangs on bad input; see ``docs/robustness.md``.
 
 from __future__ import annotations
 
-from . import graphcut, io, stereo, synth, viz
+from . import export, graphcut, io, stereo, synth, viz
 from ._core import (
     MAX_ARRAY_ELEMENTS,
     MAX_FIT_POINTS,
@@ -73,6 +73,7 @@ __all__ = [
     "estimate_stereo",
     "StereoPoseEstimator",
     "StereoPoseTracker",
+    "export",
     "graphcut",
     "stereo",
     "synth",

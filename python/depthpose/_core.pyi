@@ -55,6 +55,42 @@ class Camera:
         self, fx: float, fy: float, cx: float, cy: float, width: int, height: int
     ) -> None: ...
     @staticmethod
+    def preset(name: str) -> Camera:
+        """The camera of a common depth sensor, by name.
+
+        Parameters
+        ----------
+        name : str
+            One of :meth:`presets` (case and ``_`` versus ``-`` do not matter):
+            ``kinect-v1`` (640×480, f = 580 px), ``kinect-v1-qvga`` (320×240),
+            ``kinect-v2`` (512×424, f = 365.4 px), ``azure-kinect`` (NFOV unbinned,
+            640×576, f = 504 px), ``realsense-d435`` (depth at 640×480, f = 384.2 px),
+            ``itop`` (320×240, f = 285.71 px).
+
+        Returns
+        -------
+        Camera
+            Nominal intrinsics of the sensor's depth stream; a device's own calibration
+            differs by a few pixels and is better when you have it.
+
+        Raises
+        ------
+        InvalidInputError
+            ``name`` is not a preset (the message lists the presets).
+        InvalidTypeError
+            ``name`` is not a string.
+        """
+    @staticmethod
+    def presets() -> list[str]:
+        """The names :meth:`preset` knows.
+
+        Returns
+        -------
+        list of str
+            ``["kinect-v1", "kinect-v1-qvga", "kinect-v2", "azure-kinect",
+            "realsense-d435", "itop"]``.
+        """
+    @staticmethod
     def kinect_v1() -> Camera: ...
     @staticmethod
     def kinect_v1_qvga() -> Camera: ...

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import json
 import os
-import sys
 import time
 from collections.abc import Callable
 from collections.abc import Sequence as Seq
@@ -196,23 +195,17 @@ def _merge(out_dir: Path, name: str, n_frames: int, ranges, failed_chunks: dict)
 
 
 class _Progress:
-    """A text progress bar over frames on stderr (quiet when not a terminal or CI)."""
+    """A progress bar over frames on stderr (tqdm; none when not a terminal)."""
 
     def __init__(self, total: int, enabled: bool) -> None:
-        self.total, self.done, self.t0 = total, 0, time.perf_counter()
-        self.enabled = enabled and total > 0
+        from ._progress import progress_bar
+
+        self.bar = progress_bar(total, "frames", enabled=enabled and total > 0)
 
     def add(self, n: int) -> None:
-        self.done += n
-        if not self.enabled:
-            return
-        frac = self.done / self.total
-        rate = self.done / max(time.perf_counter() - self.t0, 1e-9)
-        bar = "#" * int(30 * frac)
-        sys.stderr.write(f"\r[{bar:<30}] {self.done}/{self.total} frames {rate:6.1f}/s")
-        if self.done >= self.total:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
+        self.bar.update(n)
+        if self.bar.n >= (self.bar.total or 0):
+            self.bar.close()
 
 
 def run(
@@ -226,6 +219,7 @@ def run(
     overlap: int = 4,
     track: bool = True,
     intrinsics: Seq[float] | None = None,
+    camera: Any = None,
     depth_scale: float = 0.001,
     templates: str | os.PathLike[str] | None = None,
     progress: bool = True,
@@ -236,7 +230,10 @@ def run(
     ``client``: a ``distributed.Client`` to use; else ``scheduler`` (``tcp://host:port``)
     to connect to; else a local cluster of ``n_workers`` processes (one per core) on
     loopback. ``templates``: a saved template database shared by all workers (default:
-    the cached default database, built once here if needed).
+    the cached default database, built once here if needed). ``camera``: a ``Camera``
+    (or a function of the frames' shape (H, W) returning one) instead of ``intrinsics``,
+    as :func:`depthpose.sequence.open_sequence` takes it. ``depth_scale``: metres per
+    integer unit.
     """
     try:
         from distributed import Client, LocalCluster, as_completed
@@ -253,7 +250,9 @@ def run(
     seqs = []
     for p in expand_inputs([os.fspath(i) for i in inputs]):
         try:
-            seqs.append(open_sequence(p, intrinsics=intrinsics, depth_scale=depth_scale))
+            seqs.append(
+                open_sequence(p, intrinsics=intrinsics, depth_scale=depth_scale, camera=camera)
+            )
         except DepthPoseError as e:
             name = p.stem if p.suffix else p.name
             summary.failed_sequences.append(name)
@@ -289,7 +288,13 @@ def run(
                     stop=stop,
                     overlap=overlap,
                     track=track,
-                    intrinsics=None if intrinsics is None else list(intrinsics),
+                    intrinsics=(
+                        list(seq.camera.intrinsics)
+                        if camera is not None
+                        else None
+                        if intrinsics is None
+                        else list(intrinsics)
+                    ),
                     depth_scale=depth_scale,
                     templates=os.fspath(templates),
                     out=os.fspath(path),

@@ -41,6 +41,46 @@ def _exit_code(done: int, failed: int) -> int:
     return 1 if done > 0 else 2
 
 
+#: Help of ``--depth-scale``: the Open3D convention.
+_DEPTH_SCALE_HELP = (
+    "integer depth units per metre (Open3D's depth_scale): 1000 for millimetres "
+    "(default), 10000 for 0.1 mm; metres = raw / depth_scale. Float files are metres."
+)
+
+
+def _metres_per_unit(depth_scale: float) -> float:
+    """The readers' scale (metres per unit) of ``--depth-scale`` (units per metre)."""
+    from ._core import MAX_DEPTH_SCALE, MIN_DEPTH_SCALE
+
+    low, high = 1.0 / MAX_DEPTH_SCALE, 1.0 / MIN_DEPTH_SCALE
+    if not (np.isfinite(depth_scale) and low <= depth_scale <= high):
+        hint = " (it counts units per metre: 1000 for millimetres)" if depth_scale < 1 else ""
+        raise InvalidInputError(
+            f"--depth-scale: must be in [{low:g}, {high:g}] units per metre, "
+            f"got {depth_scale:g}{hint}"
+        )
+    return 1.0 / depth_scale
+
+
+def _preset(name: str | None, shape: tuple[int, int], what: str):
+    """The camera preset ``name`` for images of ``shape`` (H, W): the preset itself, or
+    the preset resampled when the images have its aspect ratio at another size."""
+    from . import Camera
+
+    if name is None:
+        return None
+    cam = Camera.preset(name)
+    if cam.shape == shape:
+        return cam
+    factor = shape[1] / cam.width
+    if abs(cam.height * factor - shape[0]) < 0.5:
+        return cam.scaled(factor)
+    raise InvalidInputError(
+        f"--camera {name}: the preset is {cam.width}x{cam.height} pixels but {what} is "
+        f"{shape[1]}x{shape[0]}"
+    )
+
+
 def _cmd_foreground(args: argparse.Namespace) -> int:
     """Foreground masks of depth frames, written as pictures, image by image: an image
     that fails is reported and the others are written."""
@@ -48,12 +88,14 @@ def _cmd_foreground(args: argparse.Namespace) -> int:
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    background = read_depth(args.background, scale=args.depth_scale) if args.background else None
+    scale = _metres_per_unit(args.depth_scale)
+    background = read_depth(args.background, scale=scale) if args.background else None
     done = failed = 0
     for path in args.inputs:
         try:
-            depth = read_depth(path, scale=args.depth_scale)
-            mask = foreground_mask(depth, background)
+            depth = read_depth(path, scale=scale)
+            camera = _preset(args.camera, depth.shape, path)
+            mask = foreground_mask(depth, background, camera=camera)
             pic = viz.overlay_mask(viz.colorize_depth(depth), mask)
             viz.save_png(out / (Path(path).stem + "_foreground.png"), pic)
         except Exception as e:  # one image's failure must not stop the others
@@ -73,10 +115,20 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     recorded as NaN; the others are estimated and written."""
     import json
 
+    from ._progress import progress_bar
+    from .body import BodyModel
     from .pipeline import JOINT_NAMES, PoseEstimator, PoseTracker
     from .sequence import open_sequence
 
-    seq = open_sequence(args.input, intrinsics=args.intrinsics, depth_scale=args.depth_scale)
+    if args.camera is not None and args.intrinsics is not None:
+        raise InvalidInputError("--camera: give either --camera or --intrinsics, not both")
+    seq = open_sequence(
+        args.input,
+        intrinsics=args.intrinsics,
+        depth_scale=_metres_per_unit(args.depth_scale),
+        camera=(lambda shape: _preset(args.camera, shape, args.input)) if args.camera else None,
+        pattern=args.glob,
+    )
     out = Path(args.out)
     _check_writable(out)
     viz_dir = Path(args.viz) if args.viz else None
@@ -87,6 +139,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     joints = np.full((n, 15, 3), np.nan)
     pose = np.full((n, 22), np.nan)
     confidence = np.zeros((n, 15))
+    shape: np.ndarray | None = None  # (n, S) once the first frame gives S
     errors: list[tuple[int, str]] = []
     if args.track:
         tracker = PoseTracker(seq.camera, background=seq.background)
@@ -94,9 +147,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     else:
         step = PoseEstimator(seq.camera, background=seq.background).estimate
     t0 = time.perf_counter()
+    bar = progress_bar(n, "frames")
     try:
         for k, frame in seq.iter_frames():
-            sys.stderr.write(f"\rframe {k + 1}/{n}")
+            bar.update(1)
             try:
                 if isinstance(frame, Exception):
                     raise frame
@@ -117,10 +171,13 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                     jsonl.write("\n")
                 continue
             joints[k], pose[k], confidence[k] = res.joints, res.pose, res.confidence
+            if shape is None:
+                shape = np.full((n, len(res.shape)), np.nan)
+            shape[k] = res.shape
             if jsonl:
                 jsonl.write(json.dumps({"frame": k, **res.to_dict()}) + "\n")
     finally:
-        sys.stderr.write("\n")
+        bar.close()
         if jsonl:
             jsonl.close()
     for k, message in errors:
@@ -128,6 +185,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     np.savez(
         out, joints=joints, pose=pose, confidence=confidence,
         joint_names=np.array(JOINT_NAMES),
+        shape=shape if shape is not None else np.full((n, len(BodyModel().shape)), np.nan),
         failed_frames=np.array([k for k, _ in errors], np.int64),
         errors=np.array([m for _, m in errors], dtype=str),
     )  # fmt: skip
@@ -146,10 +204,14 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 def _cmd_batch(args: argparse.Namespace) -> int:
     from .batch import run
 
+    if args.camera is not None and args.intrinsics is not None:
+        raise InvalidInputError("--camera: give either --camera or --intrinsics, not both")
+    camera = (lambda shape: _preset(args.camera, shape, "the frames")) if args.camera else None
     summary = run(
         args.inputs, args.out, scheduler=args.scheduler, n_workers=args.workers,
         chunk_frames=args.chunk_frames, overlap=args.overlap, track=args.track,
-        intrinsics=args.intrinsics, depth_scale=args.depth_scale, templates=args.templates,
+        intrinsics=args.intrinsics, camera=camera,
+        depth_scale=_metres_per_unit(args.depth_scale), templates=args.templates,
     )  # fmt: skip
     print(summary.report())
     return 0 if summary.failed_frames == 0 and not summary.failed_sequences else 1
@@ -170,10 +232,32 @@ def _cmd_templates(args: argparse.Namespace) -> int:
         db.save(path)
         print(f"{len(db)} templates written to {path}")
     else:
-        path = Path(args.out) if args.out else TemplateDatabase.default_path()
+        path = Path(args.file) if args.file else TemplateDatabase.default_path()
         db = TemplateDatabase.load(path)
         print(f"{path}: {len(db)} templates")
     return 0
+
+
+def _presets() -> list[str]:
+    from . import Camera
+
+    return list(Camera.presets())
+
+
+_CAMERA_HELP = (
+    "a sensor's intrinsics by name: " + ", ".join(_presets()) + " (resampled to images "
+    "of another size with its aspect ratio, such as a Kinect v1's at 320x240)"
+)
+
+
+def _camera_args(p: argparse.ArgumentParser) -> None:
+    """--intrinsics, --camera and --depth-scale of a command that reads depth frames."""
+    p.add_argument(
+        "--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"),
+        help="pinhole intrinsics in pixels (a .npz sequence carries its own)",
+    )  # fmt: skip
+    p.add_argument("--camera", metavar="NAME", choices=_presets(), help=_CAMERA_HELP)
+    p.add_argument("--depth-scale", type=float, default=1000.0, help=_DEPTH_SCALE_HELP)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -201,13 +285,21 @@ def build_parser() -> argparse.ArgumentParser:
         default=True,
         help="track through the sequence (default) or estimate each frame",
     )
-    est.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
-    est.add_argument("--depth-scale", type=float, default=0.001, help="metres per unit")
+    _camera_args(est)
+    est.add_argument(
+        "--glob",
+        metavar="PATTERN",
+        help="for a folder: the frames to read, e.g. 'depth_*.png' (default: every .png, "
+        ".tif, .tiff, .npy, .pfm, .u16)",
+    )
     est.set_defaults(func=_cmd_estimate)
     est.epilog = (
-        "Frames are estimated one by one: a frame that cannot be read or estimated is "
-        "reported on stderr and recorded as NaN (its index and error are in the output's "
-        "failed_frames and errors). Exit code 0: every frame estimated; 1: some failed; "
+        "Frames are estimated one by one: a frame that cannot be read or estimated (a "
+        "file in the folder that is not a depth image, too) is reported on stderr and "
+        "recorded as NaN (its index and error are in the output's failed_frames and "
+        "errors). The output also holds each frame's body shape ('shape', the model's "
+        "shape values): BodyModel() with .shape set to it gives the frame's joints back "
+        "from its 'pose'. Exit code 0: every frame estimated; 1: some failed; "
         "2: none could be (or the input could not be opened)."
     )
 
@@ -219,26 +311,30 @@ def build_parser() -> argparse.ArgumentParser:
     bat.add_argument("--chunk-frames", type=int, default=32)
     bat.add_argument("--overlap", type=int, default=4, help="warm-up frames per chunk")
     bat.add_argument("--track", action=argparse.BooleanOptionalAction, default=True)
-    bat.add_argument("--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"))
-    bat.add_argument("--depth-scale", type=float, default=0.001)
+    _camera_args(bat)
     bat.add_argument("--templates", help="a saved template database to share")
     bat.set_defaults(func=_cmd_batch)
 
+    # Its own parser (depthpose.stereo.cli_stereo) reads the arguments, --help included:
+    # main() hands it everything after "stereo".
     st = sub.add_parser("stereo", help="disparity (and depth) of a rectified stereo pair",
                         add_help=False)  # fmt: skip
-    st.add_argument("stereo_args", nargs=argparse.REMAINDER)
-    st.set_defaults(func=_cmd_stereo)
+    st.set_defaults(func=_cmd_stereo, stereo_args=[])
 
     tp = sub.add_parser("templates", help="build or inspect the template database")
-    tp.add_argument("action", choices=["build", "info"])
-    tp.add_argument("--out", help="file (default: the cache used by default)")
+    tps = tp.add_subparsers(dest="action", required=True)
+    tpb = tps.add_parser("build", help="build the database and save it")
+    tpb.add_argument("--out", help="file to write (default: the cache file used by default)")
+    tpi = tps.add_parser("info", help="load a saved database and describe it")
+    tpi.add_argument("file", nargs="?", help="file to read (default: the cache file)")
     tp.set_defaults(func=_cmd_templates)
 
     fg = sub.add_parser("foreground", help="foreground masks of depth images, as pictures")
     fg.add_argument("inputs", nargs="+", help="depth images (.png, .npy, .pfm, .u16)")
     fg.add_argument("--out", required=True, help="output folder")
     fg.add_argument("--background", help="depth image of the empty scene")
-    fg.add_argument("--depth-scale", type=float, default=0.001, help="metres per unit")
+    fg.add_argument("--camera", metavar="NAME", choices=_presets(), help=_CAMERA_HELP)
+    fg.add_argument("--depth-scale", type=float, default=1000.0, help=_DEPTH_SCALE_HELP)
     fg.set_defaults(func=_cmd_foreground)
     fg.epilog = "Exit code 0: every image done; 1: some failed; 2: none could be."
     return p
@@ -251,7 +347,12 @@ def _cmd_demo(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args, extra = parser.parse_known_args(argv)
+    if args.command == "stereo":
+        args.stereo_args = extra
+    elif extra:
+        parser.error(f"unrecognized arguments: {' '.join(extra)}")
     t0 = time.perf_counter()
     try:
         rc = int(args.func(args))

@@ -4,7 +4,6 @@ against the exact joints, the frame rate, results and pictures."""
 from __future__ import annotations
 
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -12,6 +11,7 @@ import numpy as np
 
 from . import viz
 from ._core import Camera
+from ._progress import progress_bar
 from .cloud import foreground_mask
 from .metrics import evaluate
 
@@ -35,6 +35,7 @@ def run(out: Path, frames: int = 30, motion: str = "wave") -> int:
 
     joints = np.full((frames, 15, 3), np.nan)
     times, ious, pictures = [], [], []
+    bar = progress_bar(frames, "frames")
     for t in range(frames):
         depth = depth_mm[t].astype(np.float32) / 1000
         t0 = time.perf_counter()
@@ -47,8 +48,8 @@ def run(out: Path, frames: int = 30, motion: str = "wave") -> int:
         if t % max(frames // 6, 1) == 0 and len(pictures) < 6:
             pic = viz.overlay_labels(viz.colorize_depth(depth), res.labels)
             pictures.append(viz.draw_skeleton(pic, res.joints, camera))
-        sys.stderr.write(f"\rframe {t + 1}/{frames}")
-    sys.stderr.write("\n")
+        bar.update(1)
+    bar.close()
     acc = evaluate(joints, seq["joints"])
     times_ms = 1000 * np.asarray(times)
     steady = times_ms[1:] if len(times_ms) > 1 else times_ms

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import glob
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Union
@@ -121,7 +121,20 @@ def _to_metres(depth: np.ndarray, scale: float, path: Path) -> np.ndarray:
     raise FileFormatError(f"{path}: depth must be uint16 or float, got {depth.dtype}")
 
 
-def _camera(intrinsics, shape: tuple[int, int], path: Path) -> Camera:
+def _camera(intrinsics, shape: tuple[int, int], path: Path, camera=None) -> Camera:
+    shape = (int(shape[0]), int(shape[1]))
+    if camera is not None:
+        if intrinsics is not None:
+            raise InvalidInputError("camera: give either camera or intrinsics, not both")
+        cam = camera if isinstance(camera, Camera) else camera(shape)
+        if not isinstance(cam, Camera):
+            raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(cam)}")
+        if cam.shape != shape:
+            raise InvalidInputError(
+                f"camera: the camera is {cam.width}x{cam.height} pixels but {path} is "
+                f"{shape[1]}x{shape[0]}"
+            )
+        return cam
     if intrinsics is None:
         raise InvalidInputError(
             f"intrinsics: {path} has no camera intrinsics; pass --intrinsics fx fy cx cy"
@@ -132,46 +145,71 @@ def _camera(intrinsics, shape: tuple[int, int], path: Path) -> Camera:
     return Camera.from_intrinsics([float(v) for v in vals], tuple(int(v) for v in shape))
 
 
-def _first_readable(files: list[Path], scale: float, folder: Path) -> np.ndarray:
-    """The first frame of ``files`` that can be read (its size is the sequence's)."""
+def _frame_shape(files: list[Path], scale: float, folder: Path) -> tuple[int, int]:
+    """The size (H, W) of a folder's frames: that of most of its first three readable
+    files (so that one stray image of another size is a failed frame, not the size)."""
     first_error: DepthPoseError | None = None
+    shapes: list[tuple[int, int]] = []
     for f in files:
         try:
-            return read_depth(f, scale=scale)
+            shapes.append(read_depth(f, scale=scale).shape)
         except DepthPoseError as e:
             first_error = first_error or e
-    raise FileFormatError(
-        f"{folder}: none of its {len(files)} depth frames can be read (first: {first_error})"
-    )
+        if len(shapes) == 3:
+            break
+    if not shapes:
+        raise FileFormatError(
+            f"{folder}: none of its {len(files)} depth frames can be read (first: {first_error})"
+        )
+    return max(shapes, key=shapes.count)
 
 
-def open_sequence(path: PathLike, *, intrinsics=None, depth_scale: float = 0.001) -> Sequence:
+def open_sequence(
+    path: PathLike,
+    *,
+    intrinsics=None,
+    depth_scale: float = 0.001,
+    camera: Camera | Callable[[tuple[int, int]], Camera] | None = None,
+    pattern: str | None = None,
+) -> Sequence:
     """Opens a .npz (keys ``depth`` (T, H, W), ``intrinsics``, optional ``background``,
     ``joints``, ``fps``), a folder of depth frames (sorted by name; its size is that of
-    the first frame that can be read) or one depth image. ``depth_scale``: metres per
-    integer unit, in [1e-6, 1]."""
+    most of its first three readable frames) or one depth image. ``depth_scale``:
+    metres per integer unit, in [1e-6, 1] (the readers' ``scale``; the CLI's
+    ``--depth-scale`` counts units per metre instead). ``camera``: a :class:`Camera`
+    (or a function of the image shape (H, W) returning one) instead of ``intrinsics``.
+    ``pattern``: for a folder, a glob of the frame files to read (default: every
+    depth-image suffix); a matched file that is not a depth image is a failed frame,
+    not a failed sequence."""
     if not isinstance(path, (str, os.PathLike)):
         raise InvalidTypeError(f"path: expected a path (str or os.PathLike), got {type(path)}")
     scale = _validate.number(depth_scale, "depth_scale", low=MIN_DEPTH_SCALE, high=MAX_DEPTH_SCALE)
     p = Path(path)
     if not p.exists():
         raise missing_file(p)
+    if pattern is not None and not isinstance(pattern, str):
+        raise InvalidTypeError(f"pattern: expected a glob pattern (str), got {type(pattern)}")
     if p.is_dir():
-        files = sorted(f for f in p.iterdir() if f.suffix.lower() in FRAME_SUFFIXES)
+        if pattern is not None:
+            files = sorted(f for f in p.glob(pattern) if f.is_file())
+            if not files:
+                raise FileFormatError(f"{p}: no file inside matches {pattern!r}")
+        else:
+            files = sorted(f for f in p.iterdir() if f.suffix.lower() in FRAME_SUFFIXES)
         if not files:
             raise FileFormatError(f"{p}: no depth frames ({', '.join(FRAME_SUFFIXES)}) inside")
         bg_file = p / "background.png"
         files = [f for f in files if f.name != "background.png"]
         if not files:
             raise FileFormatError(f"{p}: no depth frames besides background.png")
-        first = _first_readable(files, scale, p)
+        shape = _frame_shape(files, scale, p)
         bg = read_depth(bg_file, scale=scale) if bg_file.exists() else None
         return Sequence(
             p,
             p.name,
             "folder",
             len(files),
-            _camera(intrinsics, first.shape, p),
+            _camera(intrinsics, shape, p, camera),
             scale,
             bg,
             files=files,
@@ -194,11 +232,15 @@ def open_sequence(path: PathLike, *, intrinsics=None, depth_scale: float = 0.001
             raise FileFormatError(f"{p}: 'depth' must be (T, H, W), got {depth_shape}")
         if not (np.isfinite(fps) and fps > 0):
             raise FileFormatError(f"{p}: 'fps' must be a positive number, got {fps}")
-        cam = _camera(intr if intrinsics is None else intrinsics, depth_shape[1:], p)
+        if camera is not None:
+            cam = _camera(intrinsics, depth_shape[1:], p, camera)
+        else:
+            cam = _camera(intr if intrinsics is None else intrinsics, depth_shape[1:], p)
         background = _to_metres(bg, scale, p) if bg is not None else None
         return Sequence(p, p.stem, "npz", depth_shape[0], cam, scale, background, gt, fps)
     first = read_depth(p, scale=scale)
-    return Sequence(p, p.stem, "image", 1, _camera(intrinsics, first.shape, p), scale, files=[p])
+    cam = _camera(intrinsics, first.shape, p, camera)
+    return Sequence(p, p.stem, "image", 1, cam, scale, files=[p])
 
 
 def expand_inputs(inputs: list[str]) -> list[Path]:

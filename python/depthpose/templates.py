@@ -8,9 +8,7 @@ poses placed at the observed body; the fitting stage refines the best few.
 from __future__ import annotations
 
 import os
-import sys
 import threading
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -89,17 +87,16 @@ def _model_shape(model: Any) -> np.ndarray | None:
 
 
 def _progress_bar() -> Callable[[int, int], None]:
-    """A one-line text progress bar on stderr."""
-    start = time.perf_counter()
+    """A progress bar over the templates on stderr (tqdm; none when not a terminal)."""
+    from ._progress import progress_bar
+
+    bar = progress_bar(NUM_TEMPLATES, "templates", unit="template")
 
     def report(done: int, total: int) -> None:
-        width = 30
-        filled = int(width * done / total)
-        bar = "#" * filled + "-" * (width - filled)
-        end = "\n" if done >= total else ""
-        elapsed = time.perf_counter() - start
-        sys.stderr.write(f"\rtemplates [{bar}] {done}/{total} {elapsed:.1f}s{end}")
-        sys.stderr.flush()
+        bar.total = total
+        bar.update(done - bar.n)
+        if done >= total:
+            bar.close()
 
     return report
 

@@ -171,27 +171,17 @@ SIDE_COLORS = {"R": (230, 40, 40), "L": (40, 90, 240), "C": (240, 210, 40)}
 _JOINT_SIDE = "CCRLRLRLCRLRLRL"
 
 
-def _line(rgb: np.ndarray, a, b, color, width: int = 1) -> None:
-    h, w = rgb.shape[:2]
+def _drawable(a, b, h: int, w: int) -> bool:
+    """Whether the segment a–b is worth drawing: finite, and not absurdly long (a joint
+    near the camera plane projects far outside the picture)."""
     if not np.isfinite([*a, *b]).all():
-        return
-    span = max(abs(b[0] - a[0]), abs(b[1] - a[1]))
-    if span > 4 * (h + w):
-        return
-    n = int(span) + 1
-    us = np.linspace(a[0], b[0], n)
-    vs = np.linspace(a[1], b[1], n)
-    for du in range(-(width // 2), width // 2 + 1):
-        for dv in range(-(width // 2), width // 2 + 1):
-            u = np.round(us).astype(int) + du
-            v = np.round(vs).astype(int) + dv
-            ok = (u >= 0) & (u < w) & (v >= 0) & (v < h)
-            rgb[v[ok], u[ok]] = color
+        return False
+    return max(abs(b[0] - a[0]), abs(b[1] - a[1])) <= 4 * (h + w)
 
 
 def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -> np.ndarray:
     """Draws the 15-joint skeleton (joints (15, 3), camera frame, metres; NaN joints
-    are left out) projected into the picture."""
+    are left out) projected into the picture, with Pillow's ``ImageDraw``."""
     out = _rgb(rgb).astype(np.uint8)
     if not isinstance(camera, _core.Camera):
         raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(camera)}")
@@ -206,15 +196,23 @@ def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -
         raise InvalidInputError("joints: holds an infinite value")
     if not np.isfinite(joints).any():
         return out
+    from PIL import Image, ImageDraw
+
     uv = camera.project(np.nan_to_num(joints, nan=0.0))
     uv[~np.isfinite(joints).all(1)] = np.nan
+    h, w = out.shape[:2]
+    picture = Image.fromarray(out)
+    draw = ImageDraw.Draw(picture)
     for a, b in BONES:
-        side = _JOINT_SIDE[b] if _JOINT_SIDE[b] != "C" else _JOINT_SIDE[a]
-        _line(out, uv[a], uv[b], SIDE_COLORS[side], width)
+        if _drawable(uv[a], uv[b], h, w):
+            side = _JOINT_SIDE[b] if _JOINT_SIDE[b] != "C" else _JOINT_SIDE[a]
+            draw.line([tuple(uv[a]), tuple(uv[b])], fill=SIDE_COLORS[side], width=width)
+    r = 1.0 + 0.5 * width
     for j in range(len(uv)):
-        if np.isfinite(uv[j]).all():
-            _line(out, uv[j] - 1.5, uv[j] + 1.5, (255, 255, 255), width + 1)
-    return out
+        if _drawable(uv[j], uv[j], h, w) and -r <= uv[j][0] < w + r and -r <= uv[j][1] < h + r:
+            u, v = uv[j]
+            draw.ellipse([u - r, v - r, u + r, v + r], fill=(255, 255, 255))
+    return np.asarray(picture, dtype=np.uint8).copy()
 
 
 def plot_body_3d(model, pose: np.ndarray, ax=None, *, joints: np.ndarray | None = None):
@@ -246,7 +244,7 @@ def plot_body_3d(model, pose: np.ndarray, ax=None, *, joints: np.ndarray | None 
 
 
 def save_gif(path: PathLike, pictures: list[np.ndarray], fps: float = 10.0) -> None:
-    """An animated GIF of (H, W, 3) uint8 pictures (Pillow, which matplotlib brings)."""
+    """An animated GIF of (H, W, 3) uint8 pictures (Pillow)."""
     from PIL import Image
 
     if not isinstance(pictures, (list, tuple)) or not pictures:

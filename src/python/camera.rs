@@ -1,8 +1,8 @@
 //! `Camera` for Python.
 
-use super::convert::{f64_array, ints, invalid, reals, to_numpy, Int, Real};
+use super::convert::{f64_array, ints, invalid, reals, to_numpy, Int, Real, Text};
 use super::native_ok;
-use crate::camera::Camera;
+use crate::camera::{Camera, PRESETS};
 use crate::error::brief;
 use pyo3::prelude::*;
 
@@ -52,6 +52,20 @@ impl PyCamera {
         )?;
         check_focal(&inner)?;
         Ok(PyCamera { inner })
+    }
+
+    /// The camera of a common depth sensor by name (see `presets()`).
+    #[staticmethod]
+    fn preset(name: Text) -> PyResult<Self> {
+        Ok(PyCamera {
+            inner: Camera::preset(name.get("name")?)?,
+        })
+    }
+
+    /// The names `preset` knows.
+    #[staticmethod]
+    fn presets() -> Vec<&'static str> {
+        PRESETS.to_vec()
     }
 
     /// Kinect v1 depth camera, 640×480.
