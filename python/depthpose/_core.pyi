@@ -462,7 +462,7 @@ def fit_poses(
     config: FitConfig | None = None,
     prior: npt.NDArray[np.float64] | None = None,
     prior_weight: float = 100.0,
-    resume: list[FitResult] | None = None,
+    resume: Sequence[FitResult] | None = None,
 ) -> list[FitResult]: ...
 def label_all_pixels(
     depth: npt.NDArray[np.generic],
@@ -529,14 +529,16 @@ def crf_energy(
 ) -> int | float: ...
 
 # ---- stereo -------------------------------------------------------------------------
+# The native stereo checks take any object and name what they refuse; the facade
+# (depthpose.stereo) passes arrays, or lists it could not convert, through to them.
 def stereo_match(
-    left: np.ndarray,
-    right: np.ndarray,
+    left: object,
+    right: object,
     max_disparity: int | None = None,
     window: int = 5,
     threshold: float | None = None,
     num_seeds: int | None = None,
-    seeds: np.ndarray | None = None,
+    seeds: object | None = None,
     seed: int = 0,
     lr_check: bool = False,
     subpixel: bool = True,
@@ -547,7 +549,7 @@ def stereo_match(
     similarity: str = "mncc",
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def depth_from_disparity(
-    disparity: np.ndarray, focal: float, baseline: float, doffs: float = 0.0
+    disparity: object, focal: float, baseline: float, doffs: float = 0.0
 ) -> npt.NDArray[np.float32]: ...
 
 # ---- person segmentation ------------------------------------------------------------

@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any, Union
+from typing import TYPE_CHECKING, Any, Union, cast
 
 import numpy as np
 
 from . import _validate
 from ._core import BodyModel, InvalidInputError, InvalidTypeError
+
+if TYPE_CHECKING:
+    import trimesh
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -41,7 +44,9 @@ def _path(path: object) -> str:
     return os.fspath(path)
 
 
-def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
+def body_mesh(
+    model: BodyModel, pose: np.ndarray, *, rings: int = 20, sectors: int = 24
+) -> trimesh.Trimesh:
     """The posed super-quadric body as one ``trimesh.Trimesh`` (camera frame, metres),
     each segment's faces coloured by part."""
     import trimesh
@@ -51,14 +56,14 @@ def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
     model = _model(model)
     parts = []
     for k, (v, f) in enumerate(model.superquadric_meshes(pose, rings, sectors)):
-        m = trimesh.Trimesh(vertices=v, faces=f, process=False)
         rgba = np.append(PART_COLORS[k % len(PART_COLORS)], 255).astype(np.uint8)
-        m.visual.face_colors = np.tile(rgba, (len(f), 1))
-        parts.append(m)
-    return trimesh.util.concatenate(parts)
+        colors = np.tile(rgba, (len(f), 1))
+        parts.append(trimesh.Trimesh(vertices=v, faces=f, face_colors=colors, process=False))
+    # Joined meshes are a mesh (concatenate is typed for any geometry).
+    return cast(trimesh.Trimesh, trimesh.util.concatenate(parts))
 
 
-def save_mesh(path: PathLike, model, pose: np.ndarray) -> None:
+def save_mesh(path: PathLike, model: BodyModel, pose: np.ndarray) -> None:
     """Writes the posed body; the format follows the suffix (.ply, .glb, .gltf, .obj, .stl)."""
     suffix = _path(path).rsplit(".", 1)[-1].lower()
     if suffix not in ("ply", "glb", "gltf", "obj", "stl"):
@@ -87,7 +92,7 @@ def _rot(axis: str, deg: float) -> np.ndarray:
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
-def write_bvh(path: PathLike, model, poses: np.ndarray, fps: float = 30.0) -> None:
+def write_bvh(path: PathLike, model: BodyModel, poses: np.ndarray, fps: float = 30.0) -> None:
     """Writes a tracked sequence (T, 22) as BVH at ``fps`` frames per second: one
     joint per body segment at its proximal joint, the rest pose being all joint angles
     zero (segments parallel to the body frame), y up, metres. A failed frame (a pose of

@@ -95,11 +95,11 @@ class Graph:
         the pool's, see ``RAYON_NUM_THREADS``), then joined by one more search; the cut
         is the same for any ``threads``, a float flow value may differ in the last bits.
         """
-        return self._g.maxflow(threads)  # type: ignore[no-any-return]
+        return self._g.maxflow(threads)
 
     def segments(self) -> np.ndarray:
         """Bool array (n_nodes,): True for nodes on the sink side of the minimum cut."""
-        return self._g.segments()  # type: ignore[no-any-return]
+        return self._g.segments()
 
     def memory_bytes(self) -> int:
         """Heap bytes held by the native graph."""
@@ -108,7 +108,7 @@ class Graph:
 
 def grid_edges(h: int, w: int, connectivity: int = 4) -> np.ndarray:
     """Edges (E, 2) int64 of an ``h``×``w`` grid, row-major node ids, 4- or 8-connected."""
-    return _core.grid_edges(h, w, connectivity)  # type: ignore[no-any-return]
+    return _core.grid_edges(h, w, connectivity)
 
 
 def alpha_expansion(
@@ -127,7 +127,7 @@ def alpha_expansion(
     ``init`` (N,) start labels (default: least unary cost). Integer ``unary``,
     ``weights`` and ``pairwise`` give an exact int energy.
     """
-    return _core.alpha_expansion(  # type: ignore[no-any-return]
+    return _core.alpha_expansion(
         _c(unary),
         _c(edges),
         _c(weights),
@@ -148,7 +148,7 @@ def alpha_beta_swap(
 ) -> tuple[np.ndarray, Number]:
     """Like :func:`alpha_expansion` by alpha-beta swap moves (``pairwise`` may be a
     semi-metric: symmetric, zero exactly on the diagonal)."""
-    return _core.alpha_beta_swap(  # type: ignore[no-any-return]
+    return _core.alpha_beta_swap(
         _c(unary),
         _c(edges),
         _c(weights),
@@ -166,6 +166,4 @@ def energy(
     pairwise: np.ndarray | None = None,
 ) -> Number:
     """The CRF energy of ``labels`` (``inf`` if a node has a forbidden label)."""
-    return _core.crf_energy(  # type: ignore[no-any-return]
-        _c(labels), _c(unary), _c(edges), _c(weights), _c(pairwise)
-    )
+    return _core.crf_energy(_c(labels), _c(unary), _c(edges), _c(weights), _c(pairwise))

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Union
 
 import numpy as np
+import numpy.typing as npt
 
 from . import _validate
 from ._core import (
@@ -121,7 +122,7 @@ def _to_metres(depth: np.ndarray, scale: float, path: Path) -> np.ndarray:
     raise FileFormatError(f"{path}: depth must be uint16 or float, got {depth.dtype}")
 
 
-def _camera(intrinsics, shape: tuple[int, int], path: Path) -> Camera:
+def _camera(intrinsics: npt.ArrayLike | None, shape: tuple[int, ...], path: Path) -> Camera:
     if intrinsics is None:
         raise InvalidInputError(
             f"intrinsics: {path} has no camera intrinsics; pass --intrinsics fx fy cx cy"
@@ -129,7 +130,7 @@ def _camera(intrinsics, shape: tuple[int, int], path: Path) -> Camera:
     vals = _validate.numbers_array(intrinsics, "intrinsics").ravel()
     if vals.size != 4:
         raise InvalidInputError(f"intrinsics: need [fx, fy, cx, cy], got {vals.size} values")
-    return Camera.from_intrinsics([float(v) for v in vals], tuple(int(v) for v in shape))
+    return Camera.from_intrinsics([float(v) for v in vals], (int(shape[0]), int(shape[1])))
 
 
 def _first_readable(files: list[Path], scale: float, folder: Path) -> np.ndarray:
@@ -145,7 +146,9 @@ def _first_readable(files: list[Path], scale: float, folder: Path) -> np.ndarray
     )
 
 
-def open_sequence(path: PathLike, *, intrinsics=None, depth_scale: float = 0.001) -> Sequence:
+def open_sequence(
+    path: PathLike, *, intrinsics: npt.ArrayLike | None = None, depth_scale: float = 0.001
+) -> Sequence:
     """Opens a .npz (keys ``depth`` (T, H, W), ``intrinsics``, optional ``background``,
     ``joints``, ``fps``), a folder of depth frames (sorted by name; its size is that of
     the first frame that can be read) or one depth image. ``depth_scale``: metres per

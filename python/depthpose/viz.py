@@ -4,7 +4,7 @@ the 3-D views use matplotlib from the ``viz`` extra)."""
 from __future__ import annotations
 
 import os
-from typing import Union
+from typing import Any, Union
 
 import numpy as np
 
@@ -108,7 +108,10 @@ def _color(color: object) -> np.ndarray:
 
 
 def overlay_mask(
-    rgb: np.ndarray, mask: np.ndarray, color: tuple[int, int, int] = (60, 200, 90), alpha=0.5
+    rgb: np.ndarray,
+    mask: np.ndarray,
+    color: tuple[int, int, int] = (60, 200, 90),
+    alpha: float = 0.5,
 ) -> np.ndarray:
     """Tints the pixels of ``mask`` (H, W) in ``color``. ``mask`` is a bool array (or
     integers 0 and 1), as everywhere in depthpose: an integer mask is not an index."""
@@ -171,7 +174,9 @@ SIDE_COLORS = {"R": (230, 40, 40), "L": (40, 90, 240), "C": (240, 210, 40)}
 _JOINT_SIDE = "CCRLRLRLCRLRLRL"
 
 
-def _line(rgb: np.ndarray, a, b, color, width: int = 1) -> None:
+def _line(
+    rgb: np.ndarray, a: np.ndarray, b: np.ndarray, color: tuple[int, int, int], width: int = 1
+) -> None:
     h, w = rgb.shape[:2]
     if not np.isfinite([*a, *b]).all():
         return
@@ -189,7 +194,9 @@ def _line(rgb: np.ndarray, a, b, color, width: int = 1) -> None:
             rgb[v[ok], u[ok]] = color
 
 
-def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -> np.ndarray:
+def draw_skeleton(
+    rgb: np.ndarray, joints: np.ndarray, camera: _core.Camera, width: int = 2
+) -> np.ndarray:
     """Draws the 15-joint skeleton (joints (15, 3), camera frame, metres; NaN joints
     are left out) projected into the picture."""
     out = _rgb(rgb).astype(np.uint8)
@@ -211,13 +218,15 @@ def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -
     for a, b in BONES:
         side = _JOINT_SIDE[b] if _JOINT_SIDE[b] != "C" else _JOINT_SIDE[a]
         _line(out, uv[a], uv[b], SIDE_COLORS[side], width)
-    for j in range(len(uv)):
-        if np.isfinite(uv[j]).all():
-            _line(out, uv[j] - 1.5, uv[j] + 1.5, (255, 255, 255), width + 1)
+    for k in range(len(uv)):
+        if np.isfinite(uv[k]).all():
+            _line(out, uv[k] - 1.5, uv[k] + 1.5, (255, 255, 255), width + 1)
     return out
 
 
-def plot_body_3d(model, pose: np.ndarray, ax=None, *, joints: np.ndarray | None = None):
+def plot_body_3d(
+    model: _core.BodyModel, pose: np.ndarray, ax: Any = None, *, joints: np.ndarray | None = None
+) -> Any:
     """A 3-D view of the fitted ellipsoid body and skeleton (matplotlib, ``viz`` extra).
     Returns the axes. Camera frame shown with y (down) flipped so the body stands up."""
     import matplotlib
