@@ -1,10 +1,72 @@
-# Type stubs for the native module depthpose._core (checked by tests/test_stub.py).
+# Type stubs for the native module depthpose._core, checked against the compiled module
+# by mypy.stubtest (.ci/run, with .ci/stubtest_allowlist.txt) and tests/test_stub.py. The
+# native classes cannot be subclassed (@final); their constructors are __new__, as the
+# native types define them.
 from collections.abc import Callable, Sequence
 from os import PathLike
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "BodyModel",
+    "Camera",
+    "Cluster",
+    "DepthPoseError",
+    "FileFormatError",
+    "FitConfig",
+    "FitResult",
+    "InvalidInputError",
+    "InvalidTypeError",
+    "JOINT_NAMES",
+    "MAX_ARRAY_ELEMENTS",
+    "MAX_DEPTH_SCALE",
+    "MAX_FIT_POINTS",
+    "MAX_IMAGE_PIXELS",
+    "MAX_LABELS",
+    "MAX_RESULT_BYTES",
+    "MIN_DEPTH_SCALE",
+    "MaxflowGraph",
+    "MissingFileError",
+    "NoBodyError",
+    "PipelineConfig",
+    "Plane",
+    "PoseResult",
+    "ResourceLimitError",
+    "Segmentation",
+    "ShapeFitResult",
+    "_PoseEstimator",
+    "_PoseTracker",
+    "_TemplateDatabase",
+    "__version__",
+    "_default_model_shape",
+    "alpha_beta_swap",
+    "alpha_expansion",
+    "crf_energy",
+    "depth_from_disparity",
+    "depth_metres",
+    "depth_to_points",
+    "fit_pose",
+    "fit_poses",
+    "foreground_mask",
+    "grid_edges",
+    "label_all_pixels",
+    "mirror_view",
+    "pixel_graph",
+    "pose_from_joints",
+    "read_depth_image",
+    "read_float_image",
+    "read_gray_image",
+    "rest_pose_penalty",
+    "segment_person",
+    "stereo_match",
+    "surface_context",
+    "surface_normals",
+    "swap_limbs",
+    "write_depth_png",
+    "write_rgb_png",
+]
 
 __version__: str
 
@@ -50,10 +112,11 @@ MAX_DEPTH_SCALE: float
 MAX_LABELS: int
 
 # ---- camera -------------------------------------------------------------------------
+@final
 class Camera:
-    def __init__(
-        self, fx: float, fy: float, cx: float, cy: float, width: int, height: int
-    ) -> None: ...
+    def __new__(
+        cls, fx: float, fy: float, cx: float, cy: float, width: int, height: int
+    ) -> Camera: ...
     @staticmethod
     def kinect_v1() -> Camera: ...
     @staticmethod
@@ -148,6 +211,7 @@ def surface_context(
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def _default_model_shape() -> npt.NDArray[np.float64]: ...
 
+@final
 class _TemplateDatabase:
     @staticmethod
     def build(
@@ -261,8 +325,9 @@ class _TemplateDatabase:
     def __len__(self) -> int: ...
 
 # ---- body ---------------------------------------------------------------------------
+@final
 class BodyModel:
-    def __init__(self, height: float = 1.75) -> None: ...
+    def __new__(cls, height: float = 1.75) -> BodyModel: ...
     @property
     def param_names(self) -> list[str]: ...
     @property
@@ -333,10 +398,11 @@ class BodyModel:
         config: FitConfig | None = None,
         lm_iterations: int = 20,
         prior_weight: float = 1e5,
-        bounds: tuple[float, float] = (0.7, 1.4),
+        bounds: tuple[float, float] | None = None,
     ) -> ShapeFitResult: ...
 
 # ---- fit (src/python/fit.rs) --------------------------------------------------------
+@final
 class FitConfig:
     sigma: float
     loss: str
@@ -364,8 +430,8 @@ class FitConfig:
     full_resolution_iterations: int
     recentred_start: bool
     swapped_limb_starts: bool
-    def __init__(
-        self,
+    def __new__(
+        cls,
         *,
         sigma: float | None = None,
         loss: str = "squared",
@@ -393,8 +459,9 @@ class FitConfig:
         full_resolution_iterations: int = 0,
         recentred_start: bool = True,
         swapped_limb_starts: bool = False,
-    ) -> None: ...
+    ) -> FitConfig: ...
 
+@final
 class FitResult:
     @property
     def pose(self) -> npt.NDArray[np.float64]: ...
@@ -419,6 +486,7 @@ class FitResult:
     @property
     def outliers(self) -> int: ...
 
+@final
 class ShapeFitResult:
     @property
     def model(self) -> BodyModel: ...
@@ -482,8 +550,9 @@ def pose_from_joints(
 ) -> npt.NDArray[np.float64]: ...
 
 # ---- graphcut -----------------------------------------------------------------------
+@final
 class MaxflowGraph:
-    def __init__(self, n_nodes: int, dtype: Any = ..., edge_hint: int = ...) -> None: ...
+    def __new__(cls, n_nodes: int, dtype: Any = ..., edge_hint: int = ...) -> MaxflowGraph: ...
     n_nodes: int
     n_edges: int
     is_integer: bool
@@ -530,29 +599,31 @@ def crf_energy(
 
 # ---- stereo -------------------------------------------------------------------------
 # The native stereo checks take any object and name what they refuse; the facade
-# (depthpose.stereo) passes arrays, or lists it could not convert, through to them.
+# (depthpose.stereo) passes arrays, or lists it could not convert, through to them. The
+# defaults are the facade's; the native signature does not show them (``...`` here).
 def stereo_match(
     left: object,
     right: object,
     max_disparity: int | None = None,
-    window: int = 5,
+    window: int = ...,
     threshold: float | None = None,
     num_seeds: int | None = None,
     seeds: object | None = None,
-    seed: int = 0,
-    lr_check: bool = False,
-    subpixel: bool = True,
-    fill_gaps: bool = True,
+    seed: int = ...,
+    lr_check: bool = ...,
+    subpixel: bool = ...,
+    fill_gaps: bool = ...,
     seed_distinctness: float | None = None,
     min_texture: float | None = None,
     min_segment: int | None = None,
-    similarity: str = "mncc",
+    similarity: str | None = None,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def depth_from_disparity(
-    disparity: object, focal: float, baseline: float, doffs: float = 0.0
+    disparity: object, focal: float, baseline: float, doffs: float = ...
 ) -> npt.NDArray[np.float32]: ...
 
 # ---- person segmentation ------------------------------------------------------------
+@final
 class Plane:
     """A support plane ``normal · X = offset`` (camera frame, metres, ``offset > 0``)."""
 
@@ -565,6 +636,7 @@ class Plane:
     @property
     def area(self) -> float: ...
 
+@final
 class Cluster:
     """A depth-continuous cluster of pixels, measured in metres."""
 
@@ -587,6 +659,7 @@ class Cluster:
     @property
     def score(self) -> float: ...
 
+@final
 class Segmentation:
     """The person's pixels and how they were found (see ``depthpose.segment_person``)."""
 
@@ -612,6 +685,7 @@ def segment_person(
 # ---- pipeline -----------------------------------------------------------------------
 JOINT_NAMES: list[str]
 
+@final
 class PipelineConfig:
     """Settings of the estimator and the tracker; keyword arguments, each optional.
 
@@ -665,11 +739,12 @@ class PipelineConfig:
         An unknown name or a nonsensical value (the message names it).
     """
 
-    def __init__(self, **kwargs: Any) -> None: ...
+    def __new__(cls, **kwargs: Any) -> PipelineConfig: ...
     def replace(self, **kwargs: Any) -> PipelineConfig: ...
     def as_dict(self) -> dict[str, Any]: ...
     def __getattr__(self, name: str) -> Any: ...
 
+@final
 class PoseResult:
     """The pose of one frame."""
 
@@ -711,16 +786,17 @@ class PoseResult:
     def to_dict(self) -> dict[str, Any]: ...
     def to_json(self) -> str: ...
 
+@final
 class _PoseEstimator:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         camera: Camera,
         templates: _TemplateDatabase,
         *,
         model: BodyModel | None = None,
         config: PipelineConfig | None = None,
         background: npt.NDArray[np.generic] | None = None,
-    ) -> None: ...
+    ) -> _PoseEstimator: ...
     def estimate(
         self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
     ) -> PoseResult: ...
@@ -741,9 +817,10 @@ class _PoseEstimator:
     @property
     def working_camera(self) -> Camera: ...
 
+@final
 class _PoseTracker:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         camera: Camera,
         templates: _TemplateDatabase,
         *,
@@ -751,11 +828,11 @@ class _PoseTracker:
         config: PipelineConfig | None = None,
         background: npt.NDArray[np.generic] | None = None,
         calibrate: bool | None = None,
-    ) -> None: ...
+    ) -> _PoseTracker: ...
     def update(
         self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
     ) -> PoseResult: ...
-    def reset(self, shape: bool = False) -> None: ...
+    def reset(self, shape: bool = ...) -> None: ...
     def start_from(self, pose: npt.NDArray[np.generic]) -> None: ...
     @property
     def model(self) -> BodyModel: ...
