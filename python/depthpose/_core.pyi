@@ -552,25 +552,63 @@ def pose_from_joints(
 # ---- graphcut -----------------------------------------------------------------------
 @final
 class MaxflowGraph:
+    """A directed graph with a source and a sink, for max-flow / min-cut
+    (``depthpose.graphcut.Graph``).
+
+    ``MaxflowGraph(n_nodes, dtype=float)`` holds float64 capacities; ``dtype=int`` int64
+    ones (exact). Build in batches from numpy arrays, then call :meth:`maxflow`;
+    :meth:`segments` gives the side of each node (True = sink side). ``edge_hint``
+    reserves room for that many edges.
+    """
+
     def __new__(cls, n_nodes: int, dtype: Any = ..., edge_hint: int = ...) -> MaxflowGraph: ...
-    n_nodes: int
-    n_edges: int
-    is_integer: bool
-    def memory_bytes(self) -> int: ...
+    @property
+    def n_nodes(self) -> int: ...
+    @property
+    def n_edges(self) -> int: ...
+    @property
+    def is_integer(self) -> bool: ...
+    def memory_bytes(self) -> int:
+        """Heap bytes held by the graph."""
+
     def add_edges(
         self, src: np.ndarray, dst: np.ndarray, cap: np.ndarray, rev_cap: np.ndarray
-    ) -> None: ...
+    ) -> None:
+        """Edges ``src[k] → dst[k]`` of capacity ``cap[k]`` and back of ``rev_cap[k]``."""
+
     def add_terminal_edges(
         self, nodes: np.ndarray, source_cap: np.ndarray, sink_cap: np.ndarray
-    ) -> None: ...
+    ) -> None:
+        """Adds ``source_cap[k]`` to source → ``nodes[k]`` and ``sink_cap[k]`` to → sink."""
+
     def update_terminal_edges(
         self, nodes: np.ndarray, delta_source: np.ndarray, delta_sink: np.ndarray
-    ) -> None: ...
-    def finalize(self) -> None: ...
-    def maxflow(self, threads: int | None = None) -> int | float: ...
-    def segments(self) -> np.ndarray: ...
+    ) -> None:
+        """Changes terminal capacities by deltas (may be negative), also after a solve;
+        the next :meth:`maxflow` reuses the previous search trees (dynamic cuts). All or
+        nothing: a refused batch (bad index, non-finite delta, an int graph's capacities
+        summing past int64) changes no capacity."""
 
-def grid_edges(h: int, w: int, connectivity: int = ...) -> np.ndarray: ...
+    def finalize(self) -> None:
+        """Builds the arc arrays now (else the next ``maxflow()`` does), so that
+        ``maxflow()`` times the solve alone."""
+
+    def maxflow(self, threads: int | None = None) -> int | float:
+        """The maximum flow value (int for an int graph).
+
+        A fresh solve of a large graph whose edges join nearby node ids (a pixel grid)
+        is split into row bands solved on up to ``threads`` threads (default: all of
+        the pool's, see ``RAYON_NUM_THREADS``), then joined by one more search; the cut
+        is the same for any ``threads``, a float flow value may differ in the last bits.
+        """
+
+    def segments(self) -> npt.NDArray[np.bool_]:
+        """Bool array (n_nodes,): True for nodes on the sink side of the minimum cut."""
+
+def grid_edges(h: int, w: int, connectivity: int = ...) -> npt.NDArray[np.int64]:
+    """Edges (E, 2) int64 of an ``h``×``w`` grid, row-major node ids, 4- or 8-connected
+    (default 4)."""
+
 def alpha_expansion(
     unary: np.ndarray,
     edges: np.ndarray,
@@ -579,7 +617,16 @@ def alpha_expansion(
     pairwise: np.ndarray | None = ...,
     init: np.ndarray | None = ...,
     max_cycles: int = ...,
-) -> tuple[np.ndarray, int | float]: ...
+) -> tuple[npt.NDArray[np.int32], int | float]:
+    """Minimises the CRF energy by alpha-expansion; returns ``(labels, energy)``.
+
+    ``unary`` (N, L) costs (``+inf`` forbids a label at a node), ``edges`` (E, 2) node
+    indices, ``weights`` (E,) ≥ 0, ``pairwise`` (L, L) a metric (default Potts),
+    ``init`` (N,) start labels (default: least unary cost), ``max_cycles`` cycles over
+    all labels at most (default 20). Integer ``unary``, ``weights`` and ``pairwise``
+    give an exact int energy.
+    """
+
 def alpha_beta_swap(
     unary: np.ndarray,
     edges: np.ndarray,
@@ -588,14 +635,19 @@ def alpha_beta_swap(
     pairwise: np.ndarray | None = ...,
     init: np.ndarray | None = ...,
     max_cycles: int = ...,
-) -> tuple[np.ndarray, int | float]: ...
+) -> tuple[npt.NDArray[np.int32], int | float]:
+    """Like :func:`alpha_expansion` by alpha-beta swap moves (``pairwise`` may be a
+    semi-metric: symmetric, zero exactly on the diagonal; ``max_cycles`` counts cycles
+    over label pairs)."""
+
 def crf_energy(
     labels: np.ndarray,
     unary: np.ndarray,
     edges: np.ndarray,
     weights: np.ndarray,
     pairwise: np.ndarray | None = ...,
-) -> int | float: ...
+) -> int | float:
+    """The CRF energy of ``labels`` (``inf`` if a node has a forbidden label)."""
 
 # ---- stereo -------------------------------------------------------------------------
 # The native stereo checks take any object and name what they refuse; the facade
