@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import ast
+import inspect
+import re
 from pathlib import Path
 
 import depthpose
+import numpy as np
+import pytest
 from depthpose import _core
 
 
@@ -34,3 +38,56 @@ def test_public_api_is_exported():
         assert hasattr(depthpose, name), name
     assert issubclass(depthpose.DepthPoseError, ValueError)
     assert (Path(depthpose.__file__).parent / "py.typed").exists()
+
+
+def _signature_defaults(f):
+    """The keyword arguments of ``f`` that have a default, at the default its runtime
+    signature shows."""
+    params = inspect.signature(f).parameters.values()
+    return {p.name: p.default for p in params if p.default is not inspect.Parameter.empty}
+
+
+def test_runtime_signatures_show_the_defaults_the_native_code_uses():
+    assert _core.FitConfig(**_signature_defaults(_core.FitConfig)) == _core.FitConfig()
+    settings = _core._TemplateDatabase.settings
+    assert settings(**_signature_defaults(settings))[0] == settings()[0]
+    camera = _core.Camera.kinect_v1_qvga()
+    pose = _core.BodyModel.neutral_pose()
+    pose[2] = 3.0
+    depth, _ = _core.BodyModel().render_depth(pose, camera)
+    for f, args in [
+        (_core.foreground_mask, (depth,)),
+        (_core.surface_normals, (depth, camera)),
+        (_core.surface_context, (depth, camera)),
+    ]:
+        defaults = {k: v for k, v in _signature_defaults(f).items() if k != "mask"}
+        given, default = f(*args, **defaults), f(*args)
+        if not isinstance(given, tuple):
+            given, default = (given,), (default,)
+        for a, b in zip(given, default, strict=True):
+            np.testing.assert_array_equal(a, b)
+    for f in (_core.fit_pose, _core.fit_poses, _core.BodyModel.fit_shape):
+        assert Ellipsis not in _signature_defaults(f).values(), f
+
+
+def test_grouped_keywords_refuse_unknown_names_as_python_does():
+    depth = np.full((24, 32), 2.0, np.float32)
+    camera = _core.Camera(30.0, 30.0, 15.5, 11.5, 32, 24)
+    pose = _core.BodyModel.neutral_pose()
+    calls = [
+        (lambda: _core.FitConfig(sigmaa=1.0), "FitConfig.__new__()", "sigmaa"),
+        (lambda: _core.fit_pose(depth, camera, pose, maks=None), "fit_pose()", "maks"),
+        (lambda: _core.foreground_mask(depth, min_dept=0.1), "foreground_mask()", "min_dept"),
+        (
+            lambda: _core._TemplateDatabase.from_depths(depth, renderer="ellipsoid"),
+            "_TemplateDatabase.from_depths()",
+            "renderer",
+        ),
+    ]
+    for call, function, name in calls:
+        with pytest.raises(TypeError, match=re.escape(f"{function} got an unexpected keyword")):
+            call()
+        with pytest.raises(TypeError, match=f"'{name}'"):
+            call()
+    with pytest.raises(TypeError):
+        _core.FitConfig(1.0)  # keyword-only

@@ -1,10 +1,72 @@
-# Type stubs for the native module depthpose._core (checked by tests/test_stub.py).
+# Type stubs for the native module depthpose._core, checked against the compiled module
+# by mypy.stubtest (.ci/run, with .ci/stubtest_allowlist.txt) and tests/test_stub.py. The
+# native classes cannot be subclassed (@final); their constructors are __new__, as the
+# native types define them.
 from collections.abc import Callable, Sequence
 from os import PathLike
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
+
+__all__ = [
+    "BodyModel",
+    "Camera",
+    "Cluster",
+    "DepthPoseError",
+    "FileFormatError",
+    "FitConfig",
+    "FitResult",
+    "InvalidInputError",
+    "InvalidTypeError",
+    "JOINT_NAMES",
+    "MAX_ARRAY_ELEMENTS",
+    "MAX_DEPTH_SCALE",
+    "MAX_FIT_POINTS",
+    "MAX_IMAGE_PIXELS",
+    "MAX_LABELS",
+    "MAX_RESULT_BYTES",
+    "MIN_DEPTH_SCALE",
+    "MaxflowGraph",
+    "MissingFileError",
+    "NoBodyError",
+    "PipelineConfig",
+    "Plane",
+    "PoseResult",
+    "ResourceLimitError",
+    "Segmentation",
+    "ShapeFitResult",
+    "_PoseEstimator",
+    "_PoseTracker",
+    "_TemplateDatabase",
+    "__version__",
+    "_default_model_shape",
+    "alpha_beta_swap",
+    "alpha_expansion",
+    "crf_energy",
+    "depth_from_disparity",
+    "depth_metres",
+    "depth_to_points",
+    "fit_pose",
+    "fit_poses",
+    "foreground_mask",
+    "grid_edges",
+    "label_all_pixels",
+    "mirror_view",
+    "pixel_graph",
+    "pose_from_joints",
+    "read_depth_image",
+    "read_float_image",
+    "read_gray_image",
+    "rest_pose_penalty",
+    "segment_person",
+    "stereo_match",
+    "surface_context",
+    "surface_normals",
+    "swap_limbs",
+    "write_depth_png",
+    "write_rgb_png",
+]
 
 __version__: str
 
@@ -50,10 +112,11 @@ MAX_DEPTH_SCALE: float
 MAX_LABELS: int
 
 # ---- camera -------------------------------------------------------------------------
+@final
 class Camera:
-    def __init__(
-        self, fx: float, fy: float, cx: float, cy: float, width: int, height: int
-    ) -> None: ...
+    def __new__(
+        cls, fx: float, fy: float, cx: float, cy: float, width: int, height: int
+    ) -> Camera: ...
     @staticmethod
     def preset(name: str) -> Camera:
         """The camera of a common depth sensor, by name.
@@ -184,6 +247,7 @@ def surface_context(
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def _default_model_shape() -> npt.NDArray[np.float64]: ...
 
+@final
 class _TemplateDatabase:
     @staticmethod
     def build(
@@ -297,8 +361,9 @@ class _TemplateDatabase:
     def __len__(self) -> int: ...
 
 # ---- body ---------------------------------------------------------------------------
+@final
 class BodyModel:
-    def __init__(self, height: float = 1.75) -> None: ...
+    def __new__(cls, height: float = 1.75) -> BodyModel: ...
     @property
     def param_names(self) -> list[str]: ...
     @property
@@ -369,10 +434,11 @@ class BodyModel:
         config: FitConfig | None = None,
         lm_iterations: int = 20,
         prior_weight: float = 1e5,
-        bounds: tuple[float, float] = (0.7, 1.4),
+        bounds: tuple[float, float] | None = None,
     ) -> ShapeFitResult: ...
 
 # ---- fit (src/python/fit.rs) --------------------------------------------------------
+@final
 class FitConfig:
     sigma: float
     loss: str
@@ -400,8 +466,8 @@ class FitConfig:
     full_resolution_iterations: int
     recentred_start: bool
     swapped_limb_starts: bool
-    def __init__(
-        self,
+    def __new__(
+        cls,
         *,
         sigma: float | None = None,
         loss: str = "squared",
@@ -429,8 +495,9 @@ class FitConfig:
         full_resolution_iterations: int = 0,
         recentred_start: bool = True,
         swapped_limb_starts: bool = False,
-    ) -> None: ...
+    ) -> FitConfig: ...
 
+@final
 class FitResult:
     @property
     def pose(self) -> npt.NDArray[np.float64]: ...
@@ -455,6 +522,7 @@ class FitResult:
     @property
     def outliers(self) -> int: ...
 
+@final
 class ShapeFitResult:
     @property
     def model(self) -> BodyModel: ...
@@ -498,7 +566,7 @@ def fit_poses(
     config: FitConfig | None = None,
     prior: npt.NDArray[np.float64] | None = None,
     prior_weight: float = 100.0,
-    resume: list[FitResult] | None = None,
+    resume: Sequence[FitResult] | None = None,
 ) -> list[FitResult]: ...
 def label_all_pixels(
     depth: npt.NDArray[np.generic],
@@ -518,26 +586,65 @@ def pose_from_joints(
 ) -> npt.NDArray[np.float64]: ...
 
 # ---- graphcut -----------------------------------------------------------------------
+@final
 class MaxflowGraph:
-    def __init__(self, n_nodes: int, dtype: Any = ..., edge_hint: int = ...) -> None: ...
-    n_nodes: int
-    n_edges: int
-    is_integer: bool
-    def memory_bytes(self) -> int: ...
+    """A directed graph with a source and a sink, for max-flow / min-cut
+    (``depthpose.graphcut.Graph``).
+
+    ``MaxflowGraph(n_nodes, dtype=float)`` holds float64 capacities; ``dtype=int`` int64
+    ones (exact). Build in batches from numpy arrays, then call :meth:`maxflow`;
+    :meth:`segments` gives the side of each node (True = sink side). ``edge_hint``
+    reserves room for that many edges.
+    """
+
+    def __new__(cls, n_nodes: int, dtype: Any = ..., edge_hint: int = ...) -> MaxflowGraph: ...
+    @property
+    def n_nodes(self) -> int: ...
+    @property
+    def n_edges(self) -> int: ...
+    @property
+    def is_integer(self) -> bool: ...
+    def memory_bytes(self) -> int:
+        """Heap bytes held by the graph."""
+
     def add_edges(
         self, src: np.ndarray, dst: np.ndarray, cap: np.ndarray, rev_cap: np.ndarray
-    ) -> None: ...
+    ) -> None:
+        """Edges ``src[k] → dst[k]`` of capacity ``cap[k]`` and back of ``rev_cap[k]``."""
+
     def add_terminal_edges(
         self, nodes: np.ndarray, source_cap: np.ndarray, sink_cap: np.ndarray
-    ) -> None: ...
+    ) -> None:
+        """Adds ``source_cap[k]`` to source → ``nodes[k]`` and ``sink_cap[k]`` to → sink."""
+
     def update_terminal_edges(
         self, nodes: np.ndarray, delta_source: np.ndarray, delta_sink: np.ndarray
-    ) -> None: ...
-    def finalize(self) -> None: ...
-    def maxflow(self, threads: int | None = None) -> int | float: ...
-    def segments(self) -> np.ndarray: ...
+    ) -> None:
+        """Changes terminal capacities by deltas (may be negative), also after a solve;
+        the next :meth:`maxflow` reuses the previous search trees (dynamic cuts). All or
+        nothing: a refused batch (bad index, non-finite delta, an int graph's capacities
+        summing past int64) changes no capacity."""
 
-def grid_edges(h: int, w: int, connectivity: int = ...) -> np.ndarray: ...
+    def finalize(self) -> None:
+        """Builds the arc arrays now (else the next ``maxflow()`` does), so that
+        ``maxflow()`` times the solve alone."""
+
+    def maxflow(self, threads: int | None = None) -> int | float:
+        """The maximum flow value (int for an int graph).
+
+        A fresh solve of a large graph whose edges join nearby node ids (a pixel grid)
+        is split into row bands solved on up to ``threads`` threads (default: all of
+        the pool's, see ``RAYON_NUM_THREADS``), then joined by one more search; the cut
+        is the same for any ``threads``, a float flow value may differ in the last bits.
+        """
+
+    def segments(self) -> npt.NDArray[np.bool_]:
+        """Bool array (n_nodes,): True for nodes on the sink side of the minimum cut."""
+
+def grid_edges(h: int, w: int, connectivity: int = ...) -> npt.NDArray[np.int64]:
+    """Edges (E, 2) int64 of an ``h``×``w`` grid, row-major node ids, 4- or 8-connected
+    (default 4)."""
+
 def alpha_expansion(
     unary: np.ndarray,
     edges: np.ndarray,
@@ -546,7 +653,16 @@ def alpha_expansion(
     pairwise: np.ndarray | None = ...,
     init: np.ndarray | None = ...,
     max_cycles: int = ...,
-) -> tuple[np.ndarray, int | float]: ...
+) -> tuple[npt.NDArray[np.int32], int | float]:
+    """Minimises the CRF energy by alpha-expansion; returns ``(labels, energy)``.
+
+    ``unary`` (N, L) costs (``+inf`` forbids a label at a node), ``edges`` (E, 2) node
+    indices, ``weights`` (E,) ≥ 0, ``pairwise`` (L, L) a metric (default Potts),
+    ``init`` (N,) start labels (default: least unary cost), ``max_cycles`` cycles over
+    all labels at most (default 20). Integer ``unary``, ``weights`` and ``pairwise``
+    give an exact int energy.
+    """
+
 def alpha_beta_swap(
     unary: np.ndarray,
     edges: np.ndarray,
@@ -555,38 +671,47 @@ def alpha_beta_swap(
     pairwise: np.ndarray | None = ...,
     init: np.ndarray | None = ...,
     max_cycles: int = ...,
-) -> tuple[np.ndarray, int | float]: ...
+) -> tuple[npt.NDArray[np.int32], int | float]:
+    """Like :func:`alpha_expansion` by alpha-beta swap moves (``pairwise`` may be a
+    semi-metric: symmetric, zero exactly on the diagonal; ``max_cycles`` counts cycles
+    over label pairs)."""
+
 def crf_energy(
     labels: np.ndarray,
     unary: np.ndarray,
     edges: np.ndarray,
     weights: np.ndarray,
     pairwise: np.ndarray | None = ...,
-) -> int | float: ...
+) -> int | float:
+    """The CRF energy of ``labels`` (``inf`` if a node has a forbidden label)."""
 
 # ---- stereo -------------------------------------------------------------------------
+# The native stereo checks take any object and name what they refuse; the facade
+# (depthpose.stereo) passes arrays, or lists it could not convert, through to them. The
+# defaults are the facade's; the native signature does not show them (``...`` here).
 def stereo_match(
-    left: np.ndarray,
-    right: np.ndarray,
+    left: object,
+    right: object,
     max_disparity: int | None = None,
-    window: int = 5,
+    window: int = ...,
     threshold: float | None = None,
     num_seeds: int | None = None,
-    seeds: np.ndarray | None = None,
-    seed: int = 0,
-    lr_check: bool = False,
-    subpixel: bool = True,
-    fill_gaps: bool = True,
+    seeds: object | None = None,
+    seed: int = ...,
+    lr_check: bool = ...,
+    subpixel: bool = ...,
+    fill_gaps: bool = ...,
     seed_distinctness: float | None = None,
     min_texture: float | None = None,
     min_segment: int | None = None,
-    similarity: str = "mncc",
+    similarity: str | None = None,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def depth_from_disparity(
-    disparity: np.ndarray, focal: float, baseline: float, doffs: float = 0.0
+    disparity: object, focal: float, baseline: float, doffs: float = ...
 ) -> npt.NDArray[np.float32]: ...
 
 # ---- person segmentation ------------------------------------------------------------
+@final
 class Plane:
     """A support plane ``normal · X = offset`` (camera frame, metres, ``offset > 0``)."""
 
@@ -599,6 +724,7 @@ class Plane:
     @property
     def area(self) -> float: ...
 
+@final
 class Cluster:
     """A depth-continuous cluster of pixels, measured in metres."""
 
@@ -621,6 +747,7 @@ class Cluster:
     @property
     def score(self) -> float: ...
 
+@final
 class Segmentation:
     """The person's pixels and how they were found (see ``depthpose.segment_person``)."""
 
@@ -646,6 +773,7 @@ def segment_person(
 # ---- pipeline -----------------------------------------------------------------------
 JOINT_NAMES: list[str]
 
+@final
 class PipelineConfig:
     """Settings of the estimator and the tracker; keyword arguments, each optional.
 
@@ -699,11 +827,12 @@ class PipelineConfig:
         An unknown name or a nonsensical value (the message names it).
     """
 
-    def __init__(self, **kwargs: Any) -> None: ...
+    def __new__(cls, **kwargs: Any) -> PipelineConfig: ...
     def replace(self, **kwargs: Any) -> PipelineConfig: ...
     def as_dict(self) -> dict[str, Any]: ...
     def __getattr__(self, name: str) -> Any: ...
 
+@final
 class PoseResult:
     """The pose of one frame."""
 
@@ -744,16 +873,17 @@ class PoseResult:
     def to_dict(self) -> dict[str, Any]: ...
     def to_json(self) -> str: ...
 
+@final
 class _PoseEstimator:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         camera: Camera,
         templates: _TemplateDatabase,
         *,
         model: BodyModel | None = None,
         config: PipelineConfig | None = None,
         background: npt.NDArray[np.generic] | None = None,
-    ) -> None: ...
+    ) -> _PoseEstimator: ...
     def estimate(
         self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
     ) -> PoseResult: ...
@@ -774,9 +904,10 @@ class _PoseEstimator:
     @property
     def working_camera(self) -> Camera: ...
 
+@final
 class _PoseTracker:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         camera: Camera,
         templates: _TemplateDatabase,
         *,
@@ -784,11 +915,11 @@ class _PoseTracker:
         config: PipelineConfig | None = None,
         background: npt.NDArray[np.generic] | None = None,
         calibrate: bool | None = None,
-    ) -> None: ...
+    ) -> _PoseTracker: ...
     def update(
         self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
     ) -> PoseResult: ...
-    def reset(self, shape: bool = False) -> None: ...
+    def reset(self, shape: bool = ...) -> None: ...
     def start_from(self, pose: npt.NDArray[np.generic]) -> None: ...
     @property
     def model(self) -> BodyModel: ...

@@ -24,12 +24,15 @@ from collections.abc import Sequence as Seq
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ._core import DepthPoseError, InvalidInputError
 from .sequence import expand_inputs, open_sequence
+
+if TYPE_CHECKING:
+    from .templates import TemplateDatabase
 
 __all__ = ["run", "plan_chunks", "BatchSummary", "process_chunk"]
 
@@ -114,7 +117,7 @@ def _chunk_ok(path: Path, start: int, stop: int) -> bool:
 
 
 @lru_cache(maxsize=4)
-def _templates(path: str | None):
+def _templates(path: str | None) -> TemplateDatabase | None:
     """The template database, loaded once per worker process."""
     if path is None:
         return None
@@ -162,7 +165,13 @@ def process_chunk(spec: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def _merge(out_dir: Path, name: str, n_frames: int, ranges, failed_chunks: dict) -> tuple:
+def _merge(
+    out_dir: Path,
+    name: str,
+    n_frames: int,
+    ranges: list[tuple[int, int]],
+    failed_chunks: dict[tuple[int, int], str],
+) -> tuple[np.ndarray, list[dict[str, Any]]]:
     joints = np.full((n_frames, JOINTS, 3), np.nan)
     pose = np.full((n_frames, PARAMS), np.nan)
     conf = np.zeros((n_frames, JOINTS))
@@ -272,7 +281,8 @@ def run(
         # A missing or corrupt file fails here, once, with its own error, not in every
         # worker's task.
         TemplateDatabase.load(templates)
-    specs, plans = [], {}
+    specs: list[dict[str, Any]] = []
+    plans: dict[str, list[tuple[int, int]]] = {}
     for seq in seqs:
         plans[seq.name] = plan_chunks(seq.n_frames, chunk_frames)
         for start, stop in plans[seq.name]:
@@ -306,16 +316,16 @@ def run(
     if specs:
         if client is None:
             if scheduler:
-                client = Client(scheduler)
+                client = Client(scheduler)  # type: ignore[no-untyped-call]
             else:
-                own_cluster = LocalCluster(
+                own_cluster = LocalCluster(  # type: ignore[no-untyped-call]
                     n_workers=n_workers or os.cpu_count() or 1,
                     threads_per_worker=1,
                     processes=True,
                     host="127.0.0.1",
                     dashboard_address=None,
                 )
-                client = Client(own_cluster)
+                client = Client(own_cluster)  # type: ignore[no-untyped-call]
         try:
             futures = [
                 client.submit(
@@ -328,7 +338,7 @@ def run(
                 for k, s in enumerate(specs)
             ]
             by_key = {f.key: s for f, s in zip(futures, specs, strict=False)}
-            for fut in as_completed(futures):
+            for fut in as_completed(futures):  # type: ignore[no-untyped-call]
                 spec = by_key[fut.key]
                 try:
                     info = fut.result()

@@ -11,12 +11,15 @@ apply a step with `BodyModel.pose_with_root_increment`.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
 
 from depthpose import _validate
 from depthpose._core import BodyModel, InvalidTypeError
+
+if TYPE_CHECKING:
+    import trimesh
 
 __all__ = ["BodyModel", "body_trimesh", "ellipsoid_trimeshes"]
 
@@ -30,7 +33,9 @@ def _check_model(model: object) -> None:
         raise InvalidTypeError(f"model: expected a depthpose.BodyModel, got {type(model).__name__}")
 
 
-def body_trimesh(model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: int = 24) -> Any:
+def body_trimesh(
+    model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: int = 24
+) -> trimesh.Trimesh:
     """All super-quadric segment meshes of `pose` joined into one `trimesh.Trimesh`
     (camera frame); `face_attributes['part']` holds each face's segment label."""
     import trimesh
@@ -39,12 +44,15 @@ def body_trimesh(model: BodyModel, pose: np.ndarray, rings: int = 20, sectors: i
     parts = model.superquadric_meshes(pose, rings, sectors)
     meshes = [trimesh.Trimesh(v, f, process=False) for v, f in parts]
     labels = np.concatenate([np.full(len(f), k, np.int16) for k, (_, f) in enumerate(parts)])
-    joined = trimesh.util.concatenate(meshes)
+    # Joined meshes are a mesh (concatenate is typed for any geometry).
+    joined = cast(trimesh.Trimesh, trimesh.util.concatenate(meshes))
     joined.face_attributes["part"] = labels
     return joined
 
 
-def ellipsoid_trimeshes(model: BodyModel, pose: np.ndarray, subdivisions: int = 4) -> list[Any]:
+def ellipsoid_trimeshes(
+    model: BodyModel, pose: np.ndarray, subdivisions: int = 4
+) -> list[trimesh.Trimesh]:
     """The fitting ellipsoids of `pose` as `trimesh` icospheres scaled and placed in the
     camera frame (one per segment, label order)."""
     import trimesh

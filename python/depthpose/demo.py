@@ -34,7 +34,9 @@ def run(out: Path, frames: int = 30, motion: str = "wave") -> int:
     tracker = PoseTracker(camera, templates=templates, background=background)
 
     joints = np.full((frames, 15, 3), np.nan)
-    times, ious, pictures = [], [], []
+    times: list[float] = []
+    ious: list[float] = []
+    pictures: list[np.ndarray] = []
     bar = progress_bar(frames, "frames")
     for t in range(frames):
         depth = depth_mm[t].astype(np.float32) / 1000

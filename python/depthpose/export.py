@@ -5,12 +5,15 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any, Union
+from typing import TYPE_CHECKING, Any, Union, cast
 
 import numpy as np
 
 from . import _validate
 from ._core import BodyModel, InvalidInputError, InvalidTypeError
+
+if TYPE_CHECKING:
+    import trimesh
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -56,7 +59,9 @@ def _path(path: object) -> str:
     return os.fspath(path)
 
 
-def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
+def body_mesh(
+    model: BodyModel, pose: np.ndarray, *, rings: int = 20, sectors: int = 24
+) -> trimesh.Trimesh:
     """The posed super-quadric body as one ``trimesh.Trimesh`` (camera frame, metres),
     each segment's faces coloured by part."""
     import trimesh
@@ -66,14 +71,14 @@ def body_mesh(model, pose: np.ndarray, *, rings: int = 20, sectors: int = 24):
     model = _model(model)
     parts = []
     for k, (v, f) in enumerate(model.superquadric_meshes(pose, rings, sectors)):
-        m = trimesh.Trimesh(vertices=v, faces=f, process=False)
         rgba = np.append(PART_COLORS[k % len(PART_COLORS)], 255).astype(np.uint8)
-        m.visual.face_colors = np.tile(rgba, (len(f), 1))
-        parts.append(m)
-    return trimesh.util.concatenate(parts)
+        colors = np.tile(rgba, (len(f), 1))
+        parts.append(trimesh.Trimesh(vertices=v, faces=f, face_colors=colors, process=False))
+    # Joined meshes are a mesh (concatenate is typed for any geometry).
+    return cast(trimesh.Trimesh, trimesh.util.concatenate(parts))
 
 
-def save_mesh(path: PathLike, model, pose: np.ndarray, *, y_up: bool = True) -> None:
+def save_mesh(path: PathLike, model: BodyModel, pose: np.ndarray, *, y_up: bool = True) -> None:
     """Writes the posed body; the format follows the suffix (.ply, .glb, .gltf, .obj,
     .stl). The mesh is y-up (the camera frame turned 180° about x: (x, -y, -z)), as
     Blender, three.js and glTF expect; ``y_up=False`` writes the camera frame (x right,
@@ -121,7 +126,7 @@ def _rot(axis: str, deg: float) -> np.ndarray:
     return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
-def _end_sites(model, names: list[str]) -> dict[str, np.ndarray]:
+def _end_sites(model: BodyModel, names: list[str]) -> dict[str, np.ndarray]:
     """The End Site offset of each segment at the rest pose, y-up: where a ray from the
     segment's joint leaves its ellipsoid (the top of the head, the tips of the hands and
     feet). The ray runs through the ellipsoid's centre when that lies ahead along the
@@ -151,7 +156,7 @@ def _end_sites(model, names: list[str]) -> dict[str, np.ndarray]:
 
 def write_bvh(
     path: PathLike,
-    model,
+    model: BodyModel,
     poses: np.ndarray,
     fps: float = 30.0,
     *,

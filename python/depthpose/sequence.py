@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Union
 
 import numpy as np
+import numpy.typing as npt
 
 from . import _validate
 from ._core import (
@@ -121,7 +122,12 @@ def _to_metres(depth: np.ndarray, scale: float, path: Path) -> np.ndarray:
     raise FileFormatError(f"{path}: depth must be uint16 or float, got {depth.dtype}")
 
 
-def _camera(intrinsics, shape: tuple[int, int], path: Path, camera=None) -> Camera:
+def _camera(
+    intrinsics: npt.ArrayLike | None,
+    shape: tuple[int, int],
+    path: Path,
+    camera: Camera | Callable[[tuple[int, int]], Camera] | None = None,
+) -> Camera:
     shape = (int(shape[0]), int(shape[1]))
     if camera is not None:
         if intrinsics is not None:
@@ -142,7 +148,7 @@ def _camera(intrinsics, shape: tuple[int, int], path: Path, camera=None) -> Came
     vals = _validate.numbers_array(intrinsics, "intrinsics").ravel()
     if vals.size != 4:
         raise InvalidInputError(f"intrinsics: need [fx, fy, cx, cy], got {vals.size} values")
-    return Camera.from_intrinsics([float(v) for v in vals], tuple(int(v) for v in shape))
+    return Camera.from_intrinsics([float(v) for v in vals], (int(shape[0]), int(shape[1])))
 
 
 def _frame_shape(files: list[Path], scale: float, folder: Path) -> tuple[int, int]:
@@ -167,7 +173,7 @@ def _frame_shape(files: list[Path], scale: float, folder: Path) -> tuple[int, in
 def open_sequence(
     path: PathLike,
     *,
-    intrinsics=None,
+    intrinsics: npt.ArrayLike | None = None,
     depth_scale: float = 0.001,
     camera: Camera | Callable[[tuple[int, int]], Camera] | None = None,
     pattern: str | None = None,

@@ -17,6 +17,7 @@ import math
 import zipfile
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -311,7 +312,7 @@ def make_sequence(
         "joints": joints,
         "intrinsics": np.array(camera.intrinsics, np.float64),
         "joint_names": np.array(model.joint_names),
-        "fps": np.float64(fps),
+        "fps": np.array(fps, np.float64),
         "meta": np.array(json.dumps(meta)),
         "poses": poses,
         "labels": labels,
@@ -320,7 +321,8 @@ def make_sequence(
 
 def save(path: str | Path, seq: dict[str, np.ndarray]) -> None:
     """Writes a sequence as a compressed .npz in the shared data's layout."""
-    np.savez_compressed(path, **seq)
+    arrays: dict[str, Any] = dict(seq)  # no key is one of savez's own keywords
+    np.savez_compressed(path, **arrays)
 
 
 def load(path: str | Path) -> dict[str, np.ndarray]:

@@ -135,7 +135,7 @@ def _raycast_depths(
 class TemplateDatabase:
     """768 rendered template poses with their surface-context descriptors."""
 
-    def __init__(self, native: Any) -> None:
+    def __init__(self, native: _core._TemplateDatabase) -> None:
         self._db = native
 
     @classmethod
@@ -268,7 +268,7 @@ class TemplateDatabase:
 
     # -- persistence -----------------------------------------------------------------
 
-    def save(self, path: str | os.PathLike) -> None:
+    def save(self, path: str | os.PathLike[str]) -> None:
         """Writes the database to an ``.npz`` file (format version and settings hash
         included)."""
         if not isinstance(path, (str, os.PathLike)):
@@ -282,7 +282,9 @@ class TemplateDatabase:
         os.replace(tmp, path)
 
     @classmethod
-    def load(cls, path: str | os.PathLike, model: Any = None, **settings: Any) -> TemplateDatabase:
+    def load(
+        cls, path: str | os.PathLike[str], model: Any = None, **settings: Any
+    ) -> TemplateDatabase:
         """Reads a database written by :meth:`save`. With ``model`` or settings given,
         refuses a file built for another model or other settings; a file of another
         format version or a corrupt file raises :class:`FileFormatError`."""
@@ -294,7 +296,8 @@ class TemplateDatabase:
         unknown = set(settings) - set(_SETTING_NAMES)
         if unknown:
             raise InvalidInputError(f"settings: unknown names {sorted(unknown)}")
-        arrays = read_npz(path, "a template database")
+        # The native reader takes the scalar entries as Python int and str.
+        arrays: dict[str, Any] = read_npz(path, "a template database")
         for k in ("format_version", "hash"):
             if k not in arrays:
                 raise FileFormatError(f"{path}: missing entry {k!r}; not a template database")

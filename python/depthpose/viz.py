@@ -4,7 +4,7 @@ the 3-D views use matplotlib from the ``viz`` extra)."""
 from __future__ import annotations
 
 import os
-from typing import Union
+from typing import Any, Union
 
 import numpy as np
 
@@ -108,7 +108,10 @@ def _color(color: object) -> np.ndarray:
 
 
 def overlay_mask(
-    rgb: np.ndarray, mask: np.ndarray, color: tuple[int, int, int] = (60, 200, 90), alpha=0.5
+    rgb: np.ndarray,
+    mask: np.ndarray,
+    color: tuple[int, int, int] = (60, 200, 90),
+    alpha: float = 0.5,
 ) -> np.ndarray:
     """Tints the pixels of ``mask`` (H, W) in ``color``. ``mask`` is a bool array (or
     integers 0 and 1), as everywhere in depthpose: an integer mask is not an index."""
@@ -171,7 +174,7 @@ SIDE_COLORS = {"R": (230, 40, 40), "L": (40, 90, 240), "C": (240, 210, 40)}
 _JOINT_SIDE = "CCRLRLRLCRLRLRL"
 
 
-def _drawable(a, b, h: int, w: int) -> bool:
+def _drawable(a: np.ndarray, b: np.ndarray, h: int, w: int) -> bool:
     """Whether the segment a–b is worth drawing: finite, and not absurdly long (a joint
     near the camera plane projects far outside the picture)."""
     if not np.isfinite([*a, *b]).all():
@@ -179,7 +182,9 @@ def _drawable(a, b, h: int, w: int) -> bool:
     return max(abs(b[0] - a[0]), abs(b[1] - a[1])) <= 4 * (h + w)
 
 
-def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -> np.ndarray:
+def draw_skeleton(
+    rgb: np.ndarray, joints: np.ndarray, camera: _core.Camera, width: int = 2
+) -> np.ndarray:
     """Draws the 15-joint skeleton (joints (15, 3), camera frame, metres; NaN joints
     are left out) projected into the picture, with Pillow's ``ImageDraw``."""
     out = _rgb(rgb).astype(np.uint8)
@@ -215,7 +220,9 @@ def draw_skeleton(rgb: np.ndarray, joints: np.ndarray, camera, width: int = 2) -
     return np.asarray(picture, dtype=np.uint8).copy()
 
 
-def plot_body_3d(model, pose: np.ndarray, ax=None, *, joints: np.ndarray | None = None):
+def plot_body_3d(
+    model: _core.BodyModel, pose: np.ndarray, ax: Any = None, *, joints: np.ndarray | None = None
+) -> Any:
     """A 3-D view of the fitted ellipsoid body and skeleton (matplotlib, ``viz`` extra).
     Returns the axes. Camera frame shown with y (down) flipped so the body stands up."""
     import matplotlib

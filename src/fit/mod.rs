@@ -352,6 +352,35 @@ impl FitProblem {
         })
     }
 
+    /// [`Self::fit_from`] from each of `inits`, in parallel (each fit's own work is
+    /// mostly sequential, the graph cuts above all, so this uses the cores far better
+    /// than fitting one start after another); with `resume`, one earlier result per
+    /// start, each continued. Results in the order of `inits`, each identical to its
+    /// own [`Self::fit_from`] call.
+    pub fn fit_each(
+        &self,
+        model: &BodyModel,
+        inits: &[Pose],
+        resume: Option<&[&FitResult]>,
+        prior: Option<&PosePrior>,
+    ) -> Result<Vec<FitResult>> {
+        if let Some(r) = resume {
+            if r.len() != inits.len() {
+                return Err(Error::invalid(
+                    "resume",
+                    format!("has {} results for {} start poses", r.len(), inits.len()),
+                ));
+            }
+        }
+        crate::pool::on_worker(|| {
+            inits
+                .par_iter()
+                .enumerate()
+                .map(|(k, init)| self.fit_from(model, init, resume.map(|r| r[k]), prior))
+                .collect()
+        })
+    }
+
     /// [`Self::fit`], or with `resume` (an earlier fit of this image, e.g. a brief
     /// one) the continuation of its EM from `init` (normally `resume`'s pose) with its
     /// labels and iteration count (see [`em::hard_em_from`]): `max_iterations` then
@@ -629,41 +658,6 @@ pub fn fit_pose(
     let init = pose_from_slice(init_pose, "init_pose")?;
     crate::pool::on_worker(|| {
         FitProblem::new(depth, camera, mask, config)?.fit(model, &init, prior)
-    })
-}
-
-/// [`fit_pose`] from each of `inits` on the same image: the cloud and graph are built
-/// once and the fits run in parallel (each fit's own work is mostly sequential, the
-/// graph cuts above all, so this uses the cores far better than fitting one start
-/// after another). With `resume` (one earlier result per start, see
-/// [`FitProblem::fit_from`]) each fit continues its earlier one. Results in the order
-/// of `inits`; identical to separate [`FitProblem::fit_from`] calls.
-#[allow(clippy::too_many_arguments)]
-pub fn fit_poses(
-    depth: &[f32],
-    camera: &Camera,
-    inits: &[Pose],
-    resume: Option<&[&FitResult]>,
-    model: &BodyModel,
-    mask: Option<&[bool]>,
-    prior: Option<&PosePrior>,
-    config: &FitConfig,
-) -> Result<Vec<FitResult>> {
-    if let Some(r) = resume {
-        if r.len() != inits.len() {
-            return Err(Error::invalid(
-                "resume",
-                format!("has {} results for {} start poses", r.len(), inits.len()),
-            ));
-        }
-    }
-    crate::pool::on_worker(|| {
-        let problem = FitProblem::new(depth, camera, mask, config)?;
-        inits
-            .par_iter()
-            .enumerate()
-            .map(|(k, init)| problem.fit_from(model, init, resume.map(|r| r[k]), prior))
-            .collect()
     })
 }
 

@@ -322,7 +322,7 @@ fn stride_out_of_range_is_an_error() {
 /// The batch builds the cloud and graph once and fits in parallel; every result must be
 /// exactly the separate fit's.
 #[test]
-fn fit_poses_equals_separate_fits() {
+fn fit_each_equals_separate_fits() {
     let model = BodyModel::default();
     let cam = Camera::itop();
     let truth = natural_pose();
@@ -336,7 +336,9 @@ fn fit_poses_equals_separate_fits() {
             ..FitConfig::default()
         };
         config.em.max_iterations = 3;
-        let batch = fit_poses(&depth, &cam, &inits, None, &model, None, None, &config).unwrap();
+        let batch = FitProblem::new(&depth, &cam, None, &config)
+            .and_then(|p| p.fit_each(&model, &inits, None, None))
+            .unwrap();
         assert_eq!(batch.len(), inits.len());
         for (init, b) in inits.iter().zip(&batch) {
             let a = fit_pose(&depth, &cam, init, &model, None, None, &config).unwrap();

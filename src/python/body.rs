@@ -5,6 +5,7 @@ use super::convert::{
     depth_array, f32_array, f64_array, fit_config, i64_array, invalid, to_numpy, Int, Real,
 };
 use super::fit::PyShapeFitResult;
+use super::keywords::keywords;
 use super::{native, native_ok};
 use crate::body::superquadric::MeshConfig;
 use crate::body::{
@@ -15,6 +16,7 @@ use crate::error::Error;
 use crate::fit::{self, ShapeConfig, ShapeFrame};
 use numpy::{PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 type F64Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
@@ -121,11 +123,23 @@ pub struct PyBodyModel {
     pub inner: BodyModel,
 }
 
+keywords! {
+    /// The keyword arguments of `BodyModel.fit_shape`.
+    struct ShapeKeywords<'py> {
+        masks: Option<Bound<'py, PyAny>> = None,
+        iterations: Int = Int::new(3),
+        config: Option<Bound<'py, PyAny>> = None,
+        lm_iterations: Int = Int::new(20),
+        prior_weight: Real = Real::new(1e5),
+        bounds: Option<Bound<'py, PyAny>> = None,
+    }
+}
+
 #[pymethods]
 impl PyBodyModel {
     /// A body `height` metres tall with reference proportions.
     #[new]
-    #[pyo3(signature = (height=Real::new(1.75)))]
+    #[pyo3(signature = (height=Real::new(1.75)), text_signature = "(height=1.75)")]
     fn new(height: Real) -> PyResult<Self> {
         Ok(PyBodyModel {
             inner: BodyModel::new(height.get("height")?)?,
@@ -335,7 +349,8 @@ impl PyBodyModel {
     /// pixel by pixel (depth difference capped at `cap` metres; a foreground pixel with
     /// nothing rendered or a rendered pixel outside the mask costs `cap`), divided by
     /// `cap` × the foreground pixel count. (K,) float64, the poses rendered in parallel.
-    #[pyo3(signature = (poses, depth, mask, camera, cap=Real::new(0.1)))]
+    #[pyo3(signature = (poses, depth, mask, camera, cap=Real::new(0.1)),
+           text_signature = "($self, poses, depth, mask, camera, cap=0.1)")]
     fn depth_discrepancies<'py>(
         &self,
         py: Python<'py>,
@@ -378,7 +393,8 @@ impl PyBodyModel {
 
     /// Super-quadric surface meshes of the 16 segments, posed in the camera frame:
     /// a list of (vertices (V, 3) float64, faces (F, 3) int64), outward faces.
-    #[pyo3(signature = (pose, rings=Int::new(20), sectors=Int::new(24)))]
+    #[pyo3(signature = (pose, rings=Int::new(20), sectors=Int::new(24)),
+           text_signature = "($self, pose, rings=20, sectors=24)")]
     fn superquadric_meshes<'py>(
         &self,
         py: Python<'py>,
@@ -454,24 +470,27 @@ impl PyBodyModel {
     /// optional person masks. Alternates per-frame pose/label fits (hard EM) with a
     /// joint Levenberg-Marquardt over the shape factors and all poses for `iterations`
     /// rounds at most. Returns a `ShapeFitResult` (`model`, `factors`, `poses`, ...).
-    #[pyo3(signature = (depths, camera, poses, *, masks=None, iterations=Int::new(3), config=None,
-        lm_iterations=Int::new(20), prior_weight=Real::new(1e5), bounds=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn fit_shape(
+    #[pyo3(signature = (depths, camera, poses, **options),
+           text_signature = "($self, depths, camera, poses, *, masks=None, iterations=3, \
+                             config=None, lm_iterations=20, prior_weight=100000.0, \
+                             bounds=None)")]
+    fn fit_shape<'py>(
         &self,
-        py: Python<'_>,
-        depths: &Bound<'_, PyAny>,
-        camera: &Bound<'_, PyAny>,
-        poses: &Bound<'_, PyAny>,
-        masks: Option<&Bound<'_, PyAny>>,
-        iterations: Int,
-        config: Option<&Bound<'_, PyAny>>,
-        lm_iterations: Int,
-        prior_weight: Real,
-        bounds: Option<&Bound<'_, PyAny>>,
+        depths: &Bound<'py, PyAny>,
+        camera: &Bound<'py, PyAny>,
+        poses: &Bound<'py, PyAny>,
+        options: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<PyShapeFitResult> {
+        let ShapeKeywords {
+            masks,
+            iterations,
+            config,
+            lm_iterations,
+            prior_weight,
+            bounds,
+        } = ShapeKeywords::parse("BodyModel.fit_shape", options)?;
         let cam = camera_arg(camera, "camera")?;
-        let bounds = match bounds {
+        let bounds = match &bounds {
             None => (0.7, 1.4),
             Some(b) => {
                 let v = super::convert::reals(b, "bounds", Some(2))?;
@@ -502,7 +521,7 @@ impl PyBodyModel {
         for (i, p) in pose_items.iter().enumerate() {
             ps.push(pose_arg(p, &format!("poses[{i}]"))?);
         }
-        let ms: Option<Vec<Vec<bool>>> = match masks {
+        let ms: Option<Vec<Vec<bool>>> = match &masks {
             None => None,
             Some(m) => {
                 let items = frame_items(m, "masks", 3)?;
@@ -527,7 +546,7 @@ impl PyBodyModel {
             points = check_fit_points(d, m, points, "depths")?;
         }
         let cfg = ShapeConfig {
-            fit: fit_config(config, "config")?,
+            fit: fit_config(config.as_ref(), "config")?,
             rounds: iterations.in_range(1, MAX_ROUNDS, "iterations")? as usize,
             lm_iterations: lm_iterations.in_range(1, MAX_ROUNDS, "lm_iterations")? as usize,
             lower: bounds.0,
@@ -542,7 +561,7 @@ impl PyBodyModel {
             other => other,
         })?;
         let base = self.inner.clone();
-        let result = native(py, || {
+        let result = native(depths.py(), || {
             let frames: Vec<ShapeFrame> = ds
                 .iter()
                 .enumerate()

@@ -1,6 +1,7 @@
 //! Depth → points, normals, neighbour graph and foreground, for Python.
 
 use super::convert::{bool_array, camera as camera_arg, depth_array, invalid, to_numpy, Int, Real};
+use super::keywords::keywords;
 use super::native;
 use crate::camera::Camera;
 use crate::cloud::{
@@ -10,6 +11,7 @@ use crate::cloud::{
 use crate::segment::{segment_person, SegmentConfig};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
 type I32Array<'py> = Bound<'py, PyArrayDyn<i32>>;
@@ -82,7 +84,8 @@ fn depth_to_points<'py>(
 
 /// Unit normals (N, 3), facing the camera, for the points of `depth_to_points`.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, radius=Int::new(2)))]
+#[pyo3(signature = (depth, camera, mask=None, radius=Int::new(2)),
+       text_signature = "(depth, camera, mask=None, radius=2)")]
 fn surface_normals<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
@@ -108,7 +111,8 @@ fn surface_normals<'py>(
 /// The neighbourhood graph between valid (masked) pixels: edges (E, 2) int32 of point
 /// indices (as in `depth_to_points`), 3-D distance (E,) and depth difference z_j − z_i (E,).
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, connectivity=Int::new(4)))]
+#[pyo3(signature = (depth, camera, mask=None, connectivity=Int::new(4)),
+       text_signature = "(depth, camera, mask=None, connectivity=4)")]
 fn pixel_graph<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
@@ -130,34 +134,41 @@ fn pixel_graph<'py>(
     ))
 }
 
+keywords! {
+    /// The keyword arguments of `foreground_mask`.
+    struct ForegroundKeywords<'py> {
+        camera: Option<Bound<'py, PyAny>> = None,
+        min_depth: Real = Real::new(0.3),
+        max_depth: Real = Real::new(8.0),
+        bg_tolerance: Real = Real::new(0.025),
+        bg_tolerance_quadratic: Real = Real::new(0.003),
+        max_step: Real = Real::new(0.25),
+        min_component: Int = Int::new(40),
+        large_share: Real = Real::new(0.3),
+    }
+}
+
 /// The person's pixels (H, W) bool. See `depthpose.foreground_mask`.
 #[pyfunction]
-#[pyo3(signature = (depth, background=None, *, camera=None, min_depth=Real::new(0.3),
-                    max_depth=Real::new(8.0), bg_tolerance=Real::new(0.025),
-                    bg_tolerance_quadratic=Real::new(0.003), max_step=Real::new(0.25),
-                    min_component=Int::new(40), large_share=Real::new(0.3)))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (depth, background=None, **options),
+       text_signature = "(depth, background=None, *, camera=None, min_depth=0.3, max_depth=8.0, \
+                         bg_tolerance=0.025, bg_tolerance_quadratic=0.003, max_step=0.25, \
+                         min_component=40, large_share=0.3)")]
 fn foreground_mask<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
     background: Option<&Bound<'py, PyAny>>,
-    camera: Option<&Bound<'py, PyAny>>,
-    min_depth: Real,
-    max_depth: Real,
-    bg_tolerance: Real,
-    bg_tolerance_quadratic: Real,
-    max_step: Real,
-    min_component: Int,
-    large_share: Real,
+    options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyArrayDyn<bool>>> {
+    let o = ForegroundKeywords::parse("foreground_mask", options)?;
     let cfg = ForegroundConfig {
-        min_depth: min_depth.get_f32("min_depth")?,
-        max_depth: max_depth.get_f32("max_depth")?,
-        bg_tolerance: bg_tolerance.get_f32("bg_tolerance")?,
-        bg_tolerance_quadratic: bg_tolerance_quadratic.get_f32("bg_tolerance_quadratic")?,
-        max_step: max_step.get_f32("max_step")?,
-        min_component: min_component.count("min_component")?,
-        large_share: large_share.get_f32("large_share")?,
+        min_depth: o.min_depth.get_f32("min_depth")?,
+        max_depth: o.max_depth.get_f32("max_depth")?,
+        bg_tolerance: o.bg_tolerance.get_f32("bg_tolerance")?,
+        bg_tolerance_quadratic: o.bg_tolerance_quadratic.get_f32("bg_tolerance_quadratic")?,
+        max_step: o.max_step.get_f32("max_step")?,
+        min_component: o.min_component.count("min_component")?,
+        large_share: o.large_share.get_f32("large_share")?,
         ..Default::default()
     };
     let d = depth_array(depth, "depth")?;
@@ -173,7 +184,7 @@ fn foreground_mask<'py>(
         }
     }
     let (h, w) = (d.shape[0], d.shape[1]);
-    let camera = match camera {
+    let camera = match &o.camera {
         Some(c) => camera_arg(c, "camera")?,
         None => Camera::nominal(w, h)?,
     };

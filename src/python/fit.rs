@@ -5,6 +5,7 @@ use super::convert::{
     body_model, bool_array, camera as camera_arg, check_fit_points, depth_array, f64_array,
     fit_config, invalid, object, to_numpy, wrong_type, Flag, Int, Real, Text,
 };
+use super::keywords::keywords;
 use super::native;
 use crate::body::{
     BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS, PART_NAMES,
@@ -17,6 +18,7 @@ use crate::fit::{self, EmConfig, FitConfig, Loss, PosePrior, MAX_STRIDE};
 use nalgebra::Vector3;
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use std::collections::HashMap;
 
 /// Settings of `fit_pose` (see the Rust docs of `depthpose::fit::em::EmConfig`).
@@ -231,50 +233,82 @@ const MAX_WEIGHT: f64 = 1e9;
 /// Largest iteration count of `FitConfig`.
 const MAX_ITERATIONS: usize = 100_000;
 
+keywords! {
+    /// The keyword arguments of `FitConfig(...)`: None (or absent) takes the Rust
+    /// default.
+    struct FitConfigKeywords {
+        sigma: Option<Real> = None,
+        loss: Option<Text> = None,
+        loss_scale: Real = Real::new(DEFAULT_LOSS_SCALE),
+        potts: Option<Real> = None,
+        contrast_weight: Option<Real> = None,
+        contrast_sigma: Option<Real> = None,
+        outlier_distance: Option<Real> = None,
+        outlier_distance_start: Option<Real> = None,
+        anneal_iterations: Option<Int> = None,
+        adaptive_anneal: Option<Flag> = None,
+        settled_joint_motion: Option<Real> = None,
+        truncation_factor: Option<Real> = None,
+        max_iterations: Option<Int> = None,
+        label_change_tolerance: Option<Real> = None,
+        energy_tolerance: Option<Real> = None,
+        expansion_cycles: Option<Int> = None,
+        free_space_weight: Option<Real> = None,
+        free_space_margin: Option<Real> = None,
+        free_space_truncation: Option<Real> = None,
+        lm_max_iterations: Option<Int> = None,
+        connectivity: Int = Int::new(4),
+        stride: Int = Int::new(1),
+        label_all_pixels: Flag = Flag::new(true),
+        full_resolution_iterations: Int = Int::new(0),
+        recentred_start: Flag = Flag::new(true),
+        swapped_limb_starts: Flag = Flag::new(false),
+    }
+}
+
 #[pymethods]
 impl PyFitConfig {
     /// All keyword arguments; defaults are the Rust defaults. Invalid values raise
     /// `InvalidInputError` naming the field.
     #[new]
-    #[pyo3(signature = (*, sigma=None, loss=None, loss_scale=Real::new(DEFAULT_LOSS_SCALE),
-        potts=None, contrast_weight=None, contrast_sigma=None, outlier_distance=None,
-        outlier_distance_start=None, anneal_iterations=None, adaptive_anneal=None,
-        settled_joint_motion=None, truncation_factor=None,
-        max_iterations=None, label_change_tolerance=None, energy_tolerance=None,
-        expansion_cycles=None, free_space_weight=None, free_space_margin=None,
-        free_space_truncation=None, lm_max_iterations=None, connectivity=Int::new(4),
-        stride=Int::new(1), label_all_pixels=Flag::new(true),
-        full_resolution_iterations=Int::new(0), recentred_start=Flag::new(true),
-        swapped_limb_starts=Flag::new(false)))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        sigma: Option<Real>,
-        loss: Option<Text>,
-        loss_scale: Real,
-        potts: Option<Real>,
-        contrast_weight: Option<Real>,
-        contrast_sigma: Option<Real>,
-        outlier_distance: Option<Real>,
-        outlier_distance_start: Option<Real>,
-        anneal_iterations: Option<Int>,
-        adaptive_anneal: Option<Flag>,
-        settled_joint_motion: Option<Real>,
-        truncation_factor: Option<Real>,
-        max_iterations: Option<Int>,
-        label_change_tolerance: Option<Real>,
-        energy_tolerance: Option<Real>,
-        expansion_cycles: Option<Int>,
-        free_space_weight: Option<Real>,
-        free_space_margin: Option<Real>,
-        free_space_truncation: Option<Real>,
-        lm_max_iterations: Option<Int>,
-        connectivity: Int,
-        stride: Int,
-        label_all_pixels: Flag,
-        full_resolution_iterations: Int,
-        recentred_start: Flag,
-        swapped_limb_starts: Flag,
-    ) -> PyResult<Self> {
+    #[pyo3(signature = (**kwargs), text_signature = "(*, sigma=None, loss='squared', \
+        loss_scale=0.03, potts=None, contrast_weight=None, contrast_sigma=None, \
+        outlier_distance=None, outlier_distance_start=None, anneal_iterations=None, \
+        adaptive_anneal=None, settled_joint_motion=None, truncation_factor=None, \
+        max_iterations=None, label_change_tolerance=None, energy_tolerance=None, \
+        expansion_cycles=None, free_space_weight=None, free_space_margin=None, \
+        free_space_truncation=None, lm_max_iterations=None, connectivity=4, stride=1, \
+        label_all_pixels=True, full_resolution_iterations=0, recentred_start=True, \
+        swapped_limb_starts=False)")]
+    fn new(kwargs: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let FitConfigKeywords {
+            sigma,
+            loss,
+            loss_scale,
+            potts,
+            contrast_weight,
+            contrast_sigma,
+            outlier_distance,
+            outlier_distance_start,
+            anneal_iterations,
+            adaptive_anneal,
+            settled_joint_motion,
+            truncation_factor,
+            max_iterations,
+            label_change_tolerance,
+            energy_tolerance,
+            expansion_cycles,
+            free_space_weight,
+            free_space_margin,
+            free_space_truncation,
+            lm_max_iterations,
+            connectivity,
+            stride,
+            label_all_pixels,
+            full_resolution_iterations,
+            recentred_start,
+            swapped_limb_starts,
+        } = FitConfigKeywords::parse("FitConfig.__new__", kwargs)?;
         let d = EmConfig::default();
         let count = |v: Option<Int>, default: usize, name: &str| -> PyResult<usize> {
             v.map_or(Ok(default), |v| v.count(name))
@@ -541,34 +575,37 @@ struct FitArgs {
     model: BodyModel,
 }
 
-/// The keyword arguments `fit_pose`, `fit_poses` and `label_all_pixels` share.
-struct FitOptions<'a, 'py> {
-    model: Option<&'a Bound<'py, PyAny>>,
-    mask: Option<&'a Bound<'py, PyAny>>,
-    config: Option<&'a Bound<'py, PyAny>>,
-    prior: Option<&'a Bound<'py, PyAny>>,
-    prior_weight: Real,
+keywords! {
+    /// The keyword arguments `fit_pose`, `fit_poses` and `label_all_pixels` share.
+    struct FitOptions<'py> {
+        model: Option<Bound<'py, PyAny>> = None,
+        mask: Option<Bound<'py, PyAny>> = None,
+        config: Option<Bound<'py, PyAny>> = None,
+        prior: Option<Bound<'py, PyAny>> = None,
+        prior_weight: Real = Real::new(100.0),
+    }
 }
 
 impl FitArgs {
     fn parse(
         depth: &Bound<'_, PyAny>,
         camera: &Bound<'_, PyAny>,
-        options: &FitOptions<'_, '_>,
+        options: &FitOptions<'_>,
     ) -> PyResult<Self> {
         let camera = camera_arg(camera, "camera")?;
-        let model = body_model(options.model, "model")?;
-        let config = fit_config(options.config, "config")?;
+        let model = body_model(options.model.as_ref(), "model")?;
+        let config = fit_config(options.config.as_ref(), "config")?;
         let prior_weight = options.prior_weight.get("prior_weight")?;
         let d = depth_array(depth, "depth")?;
         let (height, width) = (d.shape[0], d.shape[1]);
         camera.check_image("depth", height, width)?;
         let mask = options
             .mask
+            .as_ref()
             .map(|m| bool_array(m, "mask", &[height, width]))
             .transpose()?;
         check_fit_points(&d.data, mask.as_deref(), 0, "depth")?;
-        let prior = match options.prior {
+        let prior = match &options.prior {
             Some(p) => {
                 let prior = pose_arg(p, "prior")?;
                 if !(prior_weight.is_finite() && (0.0..=MAX_PRIOR_WEIGHT).contains(&prior_weight)) {
@@ -632,28 +669,18 @@ fn fit_result<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<PyRef<'py, P
 /// with `resume` (an earlier result on this image) the EM continues from its labels
 /// and iteration count.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, init_pose, *, model=None, mask=None, config=None, prior=None,
-                    prior_weight=Real::new(100.0), resume=None))]
-#[allow(clippy::too_many_arguments)]
-fn fit_pose(
-    py: Python<'_>,
-    depth: &Bound<'_, PyAny>,
-    camera: &Bound<'_, PyAny>,
-    init_pose: &Bound<'_, PyAny>,
-    model: Option<&Bound<'_, PyAny>>,
-    mask: Option<&Bound<'_, PyAny>>,
-    config: Option<&Bound<'_, PyAny>>,
-    prior: Option<&Bound<'_, PyAny>>,
-    prior_weight: Real,
-    resume: Option<&Bound<'_, PyAny>>,
+#[pyo3(signature = (depth, camera, init_pose, *, resume=None, **options),
+       text_signature = "(depth, camera, init_pose, *, model=None, mask=None, config=None, \
+                         prior=None, prior_weight=100.0, resume=None)")]
+fn fit_pose<'py>(
+    py: Python<'py>,
+    depth: &Bound<'py, PyAny>,
+    camera: &Bound<'py, PyAny>,
+    init_pose: &Bound<'py, PyAny>,
+    resume: Option<&Bound<'py, PyAny>>,
+    options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<PyFitResult> {
-    let options = FitOptions {
-        model,
-        mask,
-        config,
-        prior,
-        prior_weight,
-    };
+    let options = FitOptions::parse("fit_pose", options)?;
     let args = FitArgs::parse(depth, camera, &options)?;
     let init = pose_arg(init_pose, "init_pose")?;
     let resume = resume.map(|r| fit_result(r, "resume")).transpose()?;
@@ -677,28 +704,18 @@ fn fit_pose(
 /// (with `resume`, K earlier results, each continued); a list of K results, each
 /// identical to its own `fit_pose` call.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, init_poses, *, model=None, mask=None, config=None, prior=None,
-                    prior_weight=Real::new(100.0), resume=None))]
-#[allow(clippy::too_many_arguments)]
-fn fit_poses(
-    py: Python<'_>,
-    depth: &Bound<'_, PyAny>,
-    camera: &Bound<'_, PyAny>,
-    init_poses: &Bound<'_, PyAny>,
-    model: Option<&Bound<'_, PyAny>>,
-    mask: Option<&Bound<'_, PyAny>>,
-    config: Option<&Bound<'_, PyAny>>,
-    prior: Option<&Bound<'_, PyAny>>,
-    prior_weight: Real,
-    resume: Option<&Bound<'_, PyAny>>,
+#[pyo3(signature = (depth, camera, init_poses, *, resume=None, **options),
+       text_signature = "(depth, camera, init_poses, *, model=None, mask=None, config=None, \
+                         prior=None, prior_weight=100.0, resume=None)")]
+fn fit_poses<'py>(
+    py: Python<'py>,
+    depth: &Bound<'py, PyAny>,
+    camera: &Bound<'py, PyAny>,
+    init_poses: &Bound<'py, PyAny>,
+    resume: Option<&Bound<'py, PyAny>>,
+    options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Vec<PyFitResult>> {
-    let options = FitOptions {
-        model,
-        mask,
-        config,
-        prior,
-        prior_weight,
-    };
+    let options = FitOptions::parse("fit_poses", options)?;
     let args = FitArgs::parse(depth, camera, &options)?;
     let inits = poses_arg(init_poses, "init_poses")?;
     if inits.len() > MAX_START_POSES {
@@ -737,16 +754,13 @@ fn fit_poses(
         .as_ref()
         .map(|r| r.iter().map(|x| &x.result).collect());
     let results = native(py, || {
-        fit::fit_poses(
+        fit::FitProblem::new(
             &args.depth,
             &args.camera,
-            &inits,
-            resume.as_deref(),
-            &args.model,
             args.mask.as_deref(),
-            args.prior.as_ref(),
             &args.config,
-        )
+        )?
+        .fit_each(&args.model, &inits, resume.as_deref(), args.prior.as_ref())
     })?;
     Ok(results.into_iter().map(|r| args.result(r)).collect())
 }
@@ -757,27 +771,17 @@ const MAX_START_POSES: usize = 4096;
 /// `result` (a fit of this image with `config`, made with `label_all_pixels` off)
 /// labelled at every pixel, as the fit with `label_all_pixels` on would have been.
 #[pyfunction]
-#[pyo3(signature = (depth, camera, result, *, model=None, mask=None, config=None, prior=None,
-                    prior_weight=Real::new(100.0)))]
-#[allow(clippy::too_many_arguments)]
-fn label_all_pixels(
-    py: Python<'_>,
-    depth: &Bound<'_, PyAny>,
-    camera: &Bound<'_, PyAny>,
-    result: &Bound<'_, PyAny>,
-    model: Option<&Bound<'_, PyAny>>,
-    mask: Option<&Bound<'_, PyAny>>,
-    config: Option<&Bound<'_, PyAny>>,
-    prior: Option<&Bound<'_, PyAny>>,
-    prior_weight: Real,
+#[pyo3(signature = (depth, camera, result, **options),
+       text_signature = "(depth, camera, result, *, model=None, mask=None, config=None, \
+                         prior=None, prior_weight=100.0)")]
+fn label_all_pixels<'py>(
+    py: Python<'py>,
+    depth: &Bound<'py, PyAny>,
+    camera: &Bound<'py, PyAny>,
+    result: &Bound<'py, PyAny>,
+    options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<PyFitResult> {
-    let options = FitOptions {
-        model,
-        mask,
-        config,
-        prior,
-        prior_weight,
-    };
+    let options = FitOptions::parse("label_all_pixels", options)?;
     let args = FitArgs::parse(depth, camera, &options)?;
     let result = fit_result(result, "result")?;
     args.check_same_image(&result, "result")?;

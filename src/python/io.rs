@@ -14,7 +14,7 @@ fn image_out<'py>(py: Python<'py>, img: io::Image) -> PyResult<F32Array<'py>> {
 
 /// A 16-bit PNG/TIFF depth image (units of `scale` metres) or float TIFF, as float32 metres.
 #[pyfunction]
-#[pyo3(signature = (path, scale=Real::new(0.001)))]
+#[pyo3(signature = (path, scale=Real::new(0.001)), text_signature = "(path, scale=0.001)")]
 fn read_depth_image(py: Python<'_>, path: PathArg, scale: Real) -> PyResult<F32Array<'_>> {
     let (path, scale) = (path.get("path")?, scale.get("scale")?);
     let img = native(py, || io::read_depth(&path, scale))?;
@@ -40,7 +40,8 @@ fn read_float_image(py: Python<'_>, path: PathArg) -> PyResult<F32Array<'_>> {
 /// Writes depth (H, W) metres (or uint16 millimetres) as a 16-bit PNG in units of
 /// `scale` metres; refuses a depth the PNG cannot store.
 #[pyfunction]
-#[pyo3(signature = (path, depth, scale=Real::new(0.001)))]
+#[pyo3(signature = (path, depth, scale=Real::new(0.001)),
+       text_signature = "(path, depth, scale=0.001)")]
 fn write_depth_png(
     py: Python<'_>,
     path: PathArg,

@@ -14,6 +14,7 @@ mod convert;
 mod fit;
 mod graphcut;
 mod io;
+mod keywords;
 mod pipeline;
 mod segment;
 mod stereo;

@@ -6,6 +6,7 @@ use super::convert::{
     bool_array, camera as camera_arg, check_fit_points, check_result_bytes, counts, depth_array,
     f32_array, f64_array, i64_array, invalid, to_numpy, wrong_type, Int, Real, Text,
 };
+use super::keywords::{check_names, keywords};
 use super::native;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{BodyModel, BodyShape, NUM_JOINTS, NUM_PARAMS, NUM_SHAPE_PARAMS};
@@ -29,42 +30,66 @@ fn model_of(shape: Option<&Bound<PyAny>>) -> PyResult<BodyModel> {
     }
 }
 
+keywords! {
+    /// The template image settings, keyword arguments of the template database's
+    /// builders (see `TemplateDatabase.build`).
+    struct ImageKeywords {
+        width: Int = Int::new(96),
+        height: Int = Int::new(96),
+        distance: Real = Real::new(3.0),
+        field_height: Real = Real::new(2.4),
+    }
+}
+
+keywords! {
+    /// The surface-context settings, keyword arguments of `surface_context` and of the
+    /// template database's builders.
+    struct DescriptorKeywords {
+        samples: Int = Int::new(100),
+        radial_bins: Int = Int::new(5),
+        angular_bins: Int = Int::new(12),
+        seed: Int = Int::new(0),
+        depth_weight: Real = Real::new(0.0),
+    }
+}
+
+keywords! {
+    /// The keyword arguments of `_TemplateDatabase.match_depth`.
+    struct MatchKeywords {
+        top_k: Int = Int::new(5),
+        shortlist: Int = Int::new(16),
+        representatives: Int = Int::new(8),
+        location_weight: Real = Real::new(0.1),
+        dummy_cost: Real = Real::new(0.15),
+        rerank: Int = Int::new(0),
+    }
+}
+
 /// The template settings as Python passes them (see `TemplateDatabase.build`).
 struct Settings {
-    width: Int,
-    height: Int,
-    distance: Real,
-    field_height: Real,
+    image: ImageKeywords,
     renderer: Option<Text>,
-    samples: Int,
-    radial_bins: Int,
-    angular_bins: Int,
-    seed: Int,
-    depth_weight: Real,
+    descriptor: DescriptorKeywords,
 }
 
 impl Settings {
-    /// The defaults but for the image settings (for rendering one template).
-    fn image_only(
-        width: Int,
-        height: Int,
-        distance: Real,
-        field_height: Real,
+    /// The image and descriptor settings in `kwargs` (`function`'s keyword arguments
+    /// besides `renderer`).
+    fn parse(
+        function: &str,
         renderer: Option<Text>,
-    ) -> Self {
-        let d = TemplateConfig::default().descriptor;
-        Settings {
-            width,
-            height,
-            distance,
-            field_height,
+        kwargs: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        check_names(
+            function,
+            kwargs,
+            &[ImageKeywords::NAMES, DescriptorKeywords::NAMES],
+        )?;
+        Ok(Settings {
+            image: ImageKeywords::take(kwargs)?,
             renderer,
-            samples: Int::new(d.samples as i128),
-            radial_bins: Int::new(d.radial_bins as i128),
-            angular_bins: Int::new(d.angular_bins as i128),
-            seed: Int::new(d.seed as i128),
-            depth_weight: Real::new(d.depth_weight),
-        }
+            descriptor: DescriptorKeywords::take(kwargs)?,
+        })
     }
 
     /// The checked configuration.
@@ -85,20 +110,21 @@ impl Settings {
                 }
             },
         };
-        let seed = self.seed.in_range(0, MAX_SEED as i128 - 1, "seed")? as u64;
+        let (image, descriptor) = (&self.image, &self.descriptor);
+        let seed = descriptor.seed.in_range(0, MAX_SEED as i128 - 1, "seed")? as u64;
         let d = TemplateConfig::default();
         let c = TemplateConfig {
-            width: self.width.count("width")?,
-            height: self.height.count("height")?,
-            distance: self.distance.get("distance")?,
-            field_height: self.field_height.get("field_height")?,
+            width: image.width.count("width")?,
+            height: image.height.count("height")?,
+            distance: image.distance.get("distance")?,
+            field_height: image.field_height.get("field_height")?,
             renderer,
             descriptor: DescriptorConfig {
-                samples: self.samples.count("samples")?,
-                radial_bins: self.radial_bins.count("radial_bins")?,
-                angular_bins: self.angular_bins.count("angular_bins")?,
+                samples: descriptor.samples.count("samples")?,
+                radial_bins: descriptor.radial_bins.count("radial_bins")?,
+                angular_bins: descriptor.angular_bins.count("angular_bins")?,
                 seed,
-                depth_weight: self.depth_weight.get("depth_weight")?,
+                depth_weight: descriptor.depth_weight.get("depth_weight")?,
                 ..d.descriptor
             },
             ..d
@@ -122,35 +148,35 @@ impl Settings {
 /// (vertices, faces) of a mesh.
 type MeshArrays<'py> = (Bound<'py, PyArrayDyn<f64>>, Bound<'py, PyArrayDyn<i64>>);
 
+/// Three float32 arrays.
+type F32Arrays<'py> = (
+    Bound<'py, PyArrayDyn<f32>>,
+    Bound<'py, PyArrayDyn<f32>>,
+    Bound<'py, PyArrayDyn<f32>>,
+);
+
 /// Surface-context descriptors of the (masked) body in `depth`: (descriptors (N, 3·bins,
 /// or 4·bins with `depth_weight` > 0)
 /// float32, sample pixels (N, 2) float32 as [u, v], normalised positions (N, 2)).
 #[pyfunction]
-#[pyo3(signature = (depth, camera, mask=None, *, samples=Int::new(100), radial_bins=Int::new(5),
-                    angular_bins=Int::new(12), seed=Int::new(0), depth_weight=Real::new(0.0)))]
-#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+#[pyo3(signature = (depth, camera, mask=None, **descriptor),
+       text_signature = "(depth, camera, mask=None, *, samples=100, radial_bins=5, \
+                         angular_bins=12, seed=0, depth_weight=0.0)")]
 fn surface_context<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
     camera: &Bound<'py, PyAny>,
     mask: Option<&Bound<'py, PyAny>>,
-    samples: Int,
-    radial_bins: Int,
-    angular_bins: Int,
-    seed: Int,
-    depth_weight: Real,
-) -> PyResult<(
-    Bound<'py, PyArrayDyn<f32>>,
-    Bound<'py, PyArrayDyn<f32>>,
-    Bound<'py, PyArrayDyn<f32>>,
-)> {
+    descriptor: Option<&Bound<'py, PyDict>>,
+) -> PyResult<F32Arrays<'py>> {
+    let k = DescriptorKeywords::parse("surface_context", descriptor)?;
     let cam = camera_arg(camera, "camera")?;
     let cfg = DescriptorConfig {
-        samples: samples.count("samples")?,
-        radial_bins: radial_bins.count("radial_bins")?,
-        angular_bins: angular_bins.count("angular_bins")?,
-        seed: seed.seed("seed")?,
-        depth_weight: depth_weight.get("depth_weight")?,
+        samples: k.samples.count("samples")?,
+        radial_bins: k.radial_bins.count("radial_bins")?,
+        angular_bins: k.angular_bins.count("angular_bins")?,
+        seed: k.seed.seed("seed")?,
+        depth_weight: k.depth_weight.get("depth_weight")?,
         ..Default::default()
     };
     cfg.validate()?;
@@ -187,40 +213,21 @@ impl PyTemplateDatabase {
     /// Renders and describes all templates; `progress(done, total)` is called after
     /// each chunk.
     #[staticmethod]
-    #[pyo3(signature = (model_shape=None, *, width=Int::new(96), height=Int::new(96),
-                        distance=Real::new(3.0), field_height=Real::new(2.4), renderer=None,
-                        samples=Int::new(100), radial_bins=Int::new(5), angular_bins=Int::new(12),
-                        seed=Int::new(0), depth_weight=Real::new(0.0), progress=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (model_shape=None, *, renderer=None, progress=None, **settings),
+           text_signature = "(model_shape=None, *, width=96, height=96, distance=3.0, \
+                             field_height=2.4, renderer='superquadric', samples=100, \
+                             radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0, \
+                             progress=None)")]
     fn build(
         py: Python<'_>,
         model_shape: Option<&Bound<PyAny>>,
-        width: Int,
-        height: Int,
-        distance: Real,
-        field_height: Real,
         renderer: Option<Text>,
-        samples: Int,
-        radial_bins: Int,
-        angular_bins: Int,
-        seed: Int,
-        depth_weight: Real,
         progress: Option<Py<PyAny>>,
+        settings: Option<&Bound<PyDict>>,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
-        let cfg = Settings {
-            width,
-            height,
-            distance,
-            field_height,
-            renderer,
-            samples,
-            radial_bins,
-            angular_bins,
-            seed,
-            depth_weight,
-        }
-        .database_config()?;
+        let cfg =
+            Settings::parse("_TemplateDatabase.build", renderer, settings)?.database_config()?;
         if let Some(cb) = &progress {
             if !cb.bind(py).is_callable() {
                 return Err(wrong_type(
@@ -257,39 +264,19 @@ impl PyTemplateDatabase {
     /// A database from template depth images rendered elsewhere: `depths` (768, H, W)
     /// float32 metres for the camera of the settings, in template order.
     #[staticmethod]
-    #[pyo3(signature = (depths, model_shape=None, *, width=Int::new(96), height=Int::new(96),
-                        distance=Real::new(3.0), field_height=Real::new(2.4), samples=Int::new(100),
-                        radial_bins=Int::new(5), angular_bins=Int::new(12), seed=Int::new(0),
-                        depth_weight=Real::new(0.0)))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (depths, model_shape=None, **settings),
+           text_signature = "(depths, model_shape=None, *, width=96, height=96, distance=3.0, \
+                             field_height=2.4, samples=100, radial_bins=5, angular_bins=12, \
+                             seed=0, depth_weight=0.0)")]
     fn from_depths(
         py: Python<'_>,
         depths: &Bound<PyAny>,
         model_shape: Option<&Bound<PyAny>>,
-        width: Int,
-        height: Int,
-        distance: Real,
-        field_height: Real,
-        samples: Int,
-        radial_bins: Int,
-        angular_bins: Int,
-        seed: Int,
-        depth_weight: Real,
+        settings: Option<&Bound<PyDict>>,
     ) -> PyResult<Self> {
         let model = model_of(model_shape)?;
-        let cfg = Settings {
-            width,
-            height,
-            distance,
-            field_height,
-            renderer: None,
-            samples,
-            radial_bins,
-            angular_bins,
-            seed,
-            depth_weight,
-        }
-        .database_config()?;
+        let cfg =
+            Settings::parse("_TemplateDatabase.from_depths", None, settings)?.database_config()?;
         let d = f32_array(depths, "depths", Some(3), false)?;
         let (height, width) = (cfg.height, cfg.width);
         if d.shape != [NUM_TEMPLATES, height, width] {
@@ -309,22 +296,25 @@ impl PyTemplateDatabase {
 
     /// Depth image (H, W) float32 of template `index` rendered in Rust.
     #[staticmethod]
-    #[pyo3(signature = (index, model_shape=None, *, width=Int::new(96), height=Int::new(96),
-                        distance=Real::new(3.0), field_height=Real::new(2.4), renderer=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (index, model_shape=None, *, renderer=None, **image),
+           text_signature = "(index, model_shape=None, *, width=96, height=96, distance=3.0, \
+                             field_height=2.4, renderer='superquadric')")]
     fn render_template<'py>(
         py: Python<'py>,
         index: Int,
         model_shape: Option<&Bound<'py, PyAny>>,
-        width: Int,
-        height: Int,
-        distance: Real,
-        field_height: Real,
         renderer: Option<Text>,
+        image: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<Bound<'py, PyArrayDyn<f32>>> {
+        let image = ImageKeywords::parse("_TemplateDatabase.render_template", image)?;
         let index = index.in_range(0, NUM_TEMPLATES as i128 - 1, "index")? as usize;
         let model = model_of(model_shape)?;
-        let cfg = Settings::image_only(width, height, distance, field_height, renderer).config()?;
+        let cfg = Settings {
+            image,
+            renderer,
+            descriptor: DescriptorKeywords::default(),
+        }
+        .config()?;
         let depth = native(py, || {
             crate::templates::render_template(&model, &cfg, index)
         })?;
@@ -335,7 +325,8 @@ impl PyTemplateDatabase {
     /// camera frame): (vertices (V, 3) float64, faces (F, 3) int64).
     #[staticmethod]
     #[pyo3(signature = (index, model_shape=None, *, distance=Real::new(3.0), rings=Int::new(16),
-                        sectors=Int::new(20)))]
+                        sectors=Int::new(20)),
+           text_signature = "(index, model_shape=None, *, distance=3.0, rings=16, sectors=20)")]
     fn template_mesh<'py>(
         py: Python<'py>,
         index: Int,
@@ -369,23 +360,26 @@ impl PyTemplateDatabase {
     /// Matches the body in `depth` (H, W) metres; candidates best first, as dicts with
     /// index, view, pose (22,), joints (15, 3), cost, prune_cost, scale; and the short
     /// list of the pruning stage.
-    #[pyo3(signature = (depth, camera, mask=None, *, top_k=Int::new(5), shortlist=Int::new(16),
-                        representatives=Int::new(8), location_weight=Real::new(0.1),
-                        dummy_cost=Real::new(0.15), rerank=Int::new(0)))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (depth, camera, mask=None, **matching),
+           text_signature = "($self, depth, camera, mask=None, *, top_k=5, shortlist=16, \
+                             representatives=8, location_weight=0.1, dummy_cost=0.15, \
+                             rerank=0)")]
     fn match_depth<'py>(
         &self,
         py: Python<'py>,
         depth: &Bound<'py, PyAny>,
         camera: &Bound<'py, PyAny>,
         mask: Option<&Bound<'py, PyAny>>,
-        top_k: Int,
-        shortlist: Int,
-        representatives: Int,
-        location_weight: Real,
-        dummy_cost: Real,
-        rerank: Int,
+        matching: Option<&Bound<'py, PyDict>>,
     ) -> PyResult<(Vec<Bound<'py, PyDict>>, Vec<usize>)> {
+        let MatchKeywords {
+            top_k,
+            shortlist,
+            representatives,
+            location_weight,
+            dummy_cost,
+            rerank,
+        } = MatchKeywords::parse("_TemplateDatabase.match_depth", matching)?;
         let cam = camera_arg(camera, "camera")?;
         let top_k = top_k.count("top_k")?;
         let rerank = rerank.count("rerank")?;
@@ -431,11 +425,11 @@ impl PyTemplateDatabase {
     /// Exact matching costs of the body in `depth` against the given templates (no
     /// pruning): for measuring the pruning stage.
     #[pyo3(signature = (depth, camera, indices, mask=None, *, location_weight=Real::new(0.1),
-                        dummy_cost=Real::new(0.15)))]
-    #[allow(clippy::too_many_arguments)]
+                        dummy_cost=Real::new(0.15)),
+           text_signature = "($self, depth, camera, indices, mask=None, *, location_weight=0.1, \
+                             dummy_cost=0.15)")]
     fn exact_costs(
         &self,
-        py: Python<'_>,
         depth: &Bound<PyAny>,
         camera: &Bound<PyAny>,
         indices: &Bound<PyAny>,
@@ -461,7 +455,7 @@ impl PyTemplateDatabase {
         let d = depth_array(depth, "depth")?;
         let m = mask.map(|m| bool_array(m, "mask", &d.shape)).transpose()?;
         check_fit_points(&d.data, m.as_deref(), 0, "depth")?;
-        let r = native(py, || -> crate::Result<Vec<f64>> {
+        let r = native(depth.py(), || -> crate::Result<Vec<f64>> {
             use rayon::prelude::*;
             let view = DepthView::new(&d.data, d.shape[0], d.shape[1], "depth")?;
             let dc = &self.inner.config.descriptor;
@@ -621,39 +615,18 @@ impl PyTemplateDatabase {
 
     /// The settings hash this database's model and settings give (hex).
     #[staticmethod]
-    #[pyo3(signature = (model_shape=None, *, width=Int::new(96), height=Int::new(96),
-                        distance=Real::new(3.0), field_height=Real::new(2.4), renderer=None,
-                        samples=Int::new(100), radial_bins=Int::new(5), angular_bins=Int::new(12),
-                        seed=Int::new(0), depth_weight=Real::new(0.0)))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (model_shape=None, *, renderer=None, **settings),
+           text_signature = "(model_shape=None, *, width=96, height=96, distance=3.0, \
+                             field_height=2.4, renderer='superquadric', samples=100, \
+                             radial_bins=5, angular_bins=12, seed=0, depth_weight=0.0)")]
     fn settings(
         py: Python<'_>,
         model_shape: Option<&Bound<PyAny>>,
-        width: Int,
-        height: Int,
-        distance: Real,
-        field_height: Real,
         renderer: Option<Text>,
-        samples: Int,
-        radial_bins: Int,
-        angular_bins: Int,
-        seed: Int,
-        depth_weight: Real,
+        settings: Option<&Bound<PyDict>>,
     ) -> PyResult<(String, Py<PyAny>)> {
         let model = model_of(model_shape)?;
-        let cfg = Settings {
-            width,
-            height,
-            distance,
-            field_height,
-            renderer,
-            samples,
-            radial_bins,
-            angular_bins,
-            seed,
-            depth_weight,
-        }
-        .config()?;
+        let cfg = Settings::parse("_TemplateDatabase.settings", renderer, settings)?.config()?;
         let v = crate::templates::config_to_vec(&cfg).to_vec();
         let n = v.len();
         Ok((
