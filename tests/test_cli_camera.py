@@ -56,7 +56,8 @@ def _folder(path, depth, scale=0.001):
 
 
 def test_every_command_answers_help(capsys):
-    for command in ("demo", "estimate", "batch", "stereo", "templates", "foreground"):
+    commands = ("demo", "estimate", "estimate-stereo", "batch", "stereo", "templates")
+    for command in (*commands, "foreground"):
         with pytest.raises(SystemExit) as e:
             main([command, "--help"])
         assert e.value.code == 0, command

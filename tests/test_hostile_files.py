@@ -23,6 +23,13 @@ DEPTH[2, 3] = 0.0
 def _readers():
     """Every reader of files, by name."""
     from depthpose.sequence import open_sequence
+    from depthpose.stereo_sequence import open_stereo
+
+    def open_pairs(path):
+        seq = open_stereo(path, baseline=0.1, intrinsics=[60, 60, 3.5, 2.5])
+        for _, pair in seq.iter_pairs():
+            if isinstance(pair, Exception):
+                raise pair
 
     return {
         "read_depth": dp.read_depth,
@@ -32,6 +39,7 @@ def _readers():
         "read_npz": dpio.read_npz,
         "TemplateDatabase.load": dp.TemplateDatabase.load,
         "open_sequence": lambda p: open_sequence(p, intrinsics=[60, 60, 3.5, 2.5]),
+        "open_stereo": open_pairs,
     }
 
 
@@ -84,7 +92,7 @@ def test_corrupt_and_random_files_give_file_format_errors(
             r = outcome(lambda read=read, p=path: read(p))
             if isinstance(r, dp.DepthPoseError):
                 assert "pickle" not in str(r).lower()
-                if name != "open_sequence":  # which also checks the camera
+                if name not in ("open_sequence", "open_stereo"):  # these check the camera
                     assert isinstance(r, (dp.FileFormatError, dp.ResourceLimitError)), (name, r)
                     assert "x" + read_suffix in str(r), (name, r)
 

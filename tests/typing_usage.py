@@ -42,6 +42,11 @@ def readme_example(
     disparity: npt.NDArray[np.float32] = dp.stereo.match(left, right)
     disparity, correlation = dp.stereo.match(left, right, return_confidence=True)
     print(planes, others, mask.sum(), config.as_dict(), disparity, correlation)
+    stereo = dp.StereoPoseTracker(camera, baseline=0.12)
+    paired: dp.PoseResult = stereo.update(left, right)
+    last: npt.NDArray[np.float32] | None = stereo.disparity
+    once: dp.PoseResult = dp.estimate_stereo(left, right, camera, 0.12)
+    print(paired.joints, last, once.pose)
 
 
 def fitting_example(depth: npt.NDArray[np.float32], camera: dp.Camera) -> float:

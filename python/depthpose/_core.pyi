@@ -38,6 +38,7 @@ __all__ = [
     "ShapeFitResult",
     "_PoseEstimator",
     "_PoseTracker",
+    "_StereoPose",
     "_TemplateDatabase",
     "__version__",
     "_default_model_shape",
@@ -946,31 +947,32 @@ class _PoseTracker:
     @property
     def calibration_frame(self) -> int | None: ...
 
+@final
 class _StereoPose:
-    def __init__(
-        self,
+    def __new__(
+        cls,
         camera: Camera,
         templates: _TemplateDatabase,
         baseline: float,
         *,
-        doffs: float = 0.0,
+        doffs: float = ...,
         model: BodyModel | None = None,
         config: PipelineConfig | None = None,
         background: tuple[npt.NDArray[np.generic], npt.NDArray[np.generic]] | None = None,
         background_depth: npt.NDArray[np.generic] | None = None,
-        track: bool = True,
+        track: bool = ...,
         calibrate: bool | None = None,
         max_disparity: int | None = None,
-        fattening: bool = True,
-        disparity_tolerance: float = 1.0,
-    ) -> None: ...
+        fattening: bool = ...,
+        disparity_tolerance: float = ...,
+    ) -> _StereoPose: ...
     def update(
         self,
         left: npt.NDArray[np.generic],
         right: npt.NDArray[np.generic],
         mask: npt.NDArray[np.generic] | None = None,
     ) -> PoseResult: ...
-    def reset(self, shape: bool = False) -> None: ...
+    def reset(self, shape: bool = ...) -> None: ...
     @property
     def disparity(self) -> npt.NDArray[np.float32] | None: ...
     @property

@@ -6,11 +6,13 @@ import argparse
 import sys
 import tempfile
 import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import TypeVar
 
 import numpy as np
 
-from . import DepthPoseError, InvalidInputError, __version__
+from . import Camera, DepthPoseError, InvalidInputError, PoseResult, __version__
 
 __all__ = ["main"]
 
@@ -42,6 +44,9 @@ def _exit_code(done: int, failed: int) -> int:
 
 
 #: Help of ``--depth-scale``: the Open3D convention.
+#: A frame of a sequence: a depth image, or a stereo pair.
+_Frame = TypeVar("_Frame")
+
 _DEPTH_SCALE_HELP = (
     "integer depth units per metre (Open3D's depth_scale): 1000 for millimetres "
     "(default), 10000 for 0.1 mm; metres = raw / depth_scale. Float files are metres."
@@ -62,13 +67,9 @@ def _metres_per_unit(depth_scale: float) -> float:
     return 1.0 / depth_scale
 
 
-def _preset(name: str | None, shape: tuple[int, int], what: str):
+def _preset(name: str, shape: tuple[int, int], what: str) -> Camera:
     """The camera preset ``name`` for images of ``shape`` (H, W): the preset itself, or
     the preset resampled when the images have its aspect ratio at another size."""
-    from . import Camera
-
-    if name is None:
-        return None
     cam = Camera.preset(name)
     if cam.shape == shape:
         return cam
@@ -94,7 +95,7 @@ def _cmd_foreground(args: argparse.Namespace) -> int:
     for path in args.inputs:
         try:
             depth = read_depth(path, scale=scale)
-            camera = _preset(args.camera, depth.shape, path)
+            camera = _preset(args.camera, depth.shape, path) if args.camera else None
             mask = foreground_mask(depth, background, camera=camera)
             pic = viz.overlay_mask(viz.colorize_depth(depth), mask)
             viz.save_png(out / (Path(path).stem + "_foreground.png"), pic)
@@ -113,11 +114,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     """Poses of every frame of a sequence, a folder of frames or one image, frame by
     frame: a frame that cannot be read or estimated is reported (which, why) and
     recorded as NaN; the others are estimated and written."""
-    import json
-
-    from ._progress import progress_bar
-    from .body import BodyModel
-    from .pipeline import JOINT_NAMES, PoseEstimator, PoseTracker
+    from .pipeline import PoseEstimator, PoseTracker
     from .sequence import open_sequence
 
     if args.camera is not None and args.intrinsics is not None:
@@ -131,25 +128,102 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     )
     out = Path(args.out)
     _check_writable(out)
+    if args.track:
+        tracker = PoseTracker(seq.camera, background=seq.background)
+        step, reset = tracker.update, tracker.reset
+    else:
+        step, reset = PoseEstimator(seq.camera, background=seq.background).estimate, None
+
+    def picture(depth: np.ndarray, res: PoseResult) -> np.ndarray:
+        from . import viz
+
+        pic = viz.overlay_labels(viz.colorize_depth(depth), res.labels)
+        return viz.draw_skeleton(pic, res.joints, seq.camera)
+
+    return _run_frames(
+        args, seq.iter_frames(), seq.n_frames, step, reset, picture, seq.frame_name,
+        seq.gt_joints,
+    )  # fmt: skip
+
+
+def _cmd_estimate_stereo(args: argparse.Namespace) -> int:
+    """Poses of rectified stereo pairs (a .npz of pairs, a folder of pairs, or a left and
+    a right image), pair by pair, as ``estimate`` does for depth frames."""
+    from .stereo_pose import StereoPoseEstimator, StereoPoseTracker
+    from .stereo_sequence import open_stereo
+
+    if args.camera is not None and args.intrinsics is not None:
+        raise InvalidInputError("--camera: give either --camera or --intrinsics, not both")
+    seq = open_stereo(
+        args.input,
+        args.right,
+        baseline=args.baseline,
+        doffs=args.doffs,
+        intrinsics=args.intrinsics,
+        camera=(lambda shape: _preset(args.camera, shape, args.input)) if args.camera else None,
+        background=tuple(args.background) if args.background else None,
+    )
+    out = Path(args.out)
+    _check_writable(out)
+    kind = StereoPoseTracker if args.track else StereoPoseEstimator
+    tracker = kind(
+        seq.camera, seq.baseline, doffs=seq.doffs, background=seq.background,
+        max_disparity=args.max_disparity,
+    )  # fmt: skip
+    reset = tracker.reset if args.track else None
+
+    def step(pair: tuple[np.ndarray, np.ndarray]) -> PoseResult:
+        return tracker.update(*pair)
+
+    def picture(pair: tuple[np.ndarray, np.ndarray], res: PoseResult) -> np.ndarray:
+        from . import viz
+
+        gray = np.asarray(pair[0], dtype=np.float64)
+        if gray.ndim == 3:
+            gray = gray[..., :3].mean(axis=2)
+        top = 255.0 if gray.max(initial=0.0) > 1.0 else 1.0
+        rgb = np.repeat((np.clip(gray / top, 0, 1) * 255).astype(np.uint8)[..., None], 3, 2)
+        return viz.draw_skeleton(viz.overlay_labels(rgb, res.labels), res.joints, seq.camera)
+
+    return _run_frames(
+        args, seq.iter_pairs(), seq.n_frames, step, reset, picture, seq.frame_name,
+        seq.gt_joints,
+    )  # fmt: skip
+
+
+def _run_frames(
+    args: argparse.Namespace,
+    frames: Iterator[tuple[int, _Frame | Exception]],
+    n: int,
+    step: Callable[[_Frame], PoseResult],
+    reset: Callable[[], None] | None,
+    picture: Callable[[_Frame, PoseResult], np.ndarray],
+    frame_name: Callable[[int], str],
+    gt_joints: np.ndarray | None,
+) -> int:
+    """Runs ``step`` over ``frames`` (each a frame or the error reading it raised) and
+    writes ``args.out`` (and ``args.viz``, ``args.jsonl``): a frame that fails is
+    reported and recorded as NaN, ``reset`` (a tracker's) runs after it, and the other
+    frames are estimated and written."""
+    import json
+
+    from ._progress import progress_bar
+    from .body import BodyModel
+    from .pipeline import JOINT_NAMES
+
     viz_dir = Path(args.viz) if args.viz else None
     if viz_dir:
         viz_dir.mkdir(parents=True, exist_ok=True)
     jsonl = open(args.jsonl, "w") if args.jsonl else None  # noqa: SIM115
-    n = seq.n_frames
     joints = np.full((n, 15, 3), np.nan)
     pose = np.full((n, 22), np.nan)
     confidence = np.zeros((n, 15))
     shape: np.ndarray | None = None  # (n, S) once the first frame gives S
     errors: list[tuple[int, str]] = []
-    if args.track:
-        tracker = PoseTracker(seq.camera, background=seq.background)
-        step = tracker.update
-    else:
-        step = PoseEstimator(seq.camera, background=seq.background).estimate
     t0 = time.perf_counter()
     bar = progress_bar(n, "frames")
     try:
-        for k, frame in seq.iter_frames():
+        for k, frame in frames:
             bar.update(1)
             try:
                 if isinstance(frame, Exception):
@@ -158,12 +232,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
                 if viz_dir:
                     from . import viz
 
-                    pic = viz.overlay_labels(viz.colorize_depth(frame), res.labels)
-                    pic = viz.draw_skeleton(pic, res.joints, seq.camera)
-                    viz.save_png(viz_dir / f"frame_{k:05d}.png", pic)
+                    viz.save_png(viz_dir / f"frame_{k:05d}.png", picture(frame, res))
             except Exception as e:  # one frame's failure must not stop the others
-                if args.track:
-                    tracker.reset()
+                if reset is not None:
+                    reset()
                 joints[k], pose[k], confidence[k] = np.nan, np.nan, 0.0
                 errors.append((k, _failure(e)))
                 if jsonl:
@@ -181,9 +253,9 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         if jsonl:
             jsonl.close()
     for k, message in errors:
-        print(f"frame {k} ({seq.frame_name(k)}): {message}", file=sys.stderr)
+        print(f"frame {k} ({frame_name(k)}): {message}", file=sys.stderr)
     np.savez(
-        out, joints=joints, pose=pose, confidence=confidence,
+        Path(args.out), joints=joints, pose=pose, confidence=confidence,
         joint_names=np.array(JOINT_NAMES),
         shape=shape if shape is not None else np.full((n, len(BodyModel().shape)), np.nan),
         failed_frames=np.array([k for k, _ in errors], np.int64),
@@ -192,10 +264,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     dt = time.perf_counter() - t0
     done = n - len(errors)
     print(f"{done}/{n} frames estimated in {dt:.1f} s ({n / max(dt, 1e-9):.1f} frames/s)")
-    if seq.gt_joints is not None and seq.gt_joints.shape == joints.shape:
+    if gt_joints is not None and gt_joints.shape == joints.shape:
         from .metrics import evaluate
 
-        acc = evaluate(joints, seq.gt_joints)
+        acc = evaluate(joints, gt_joints)
         print(f"against the sequence's joints: MPJPE {acc['mpjpe_mm']:.1f} mm, "
               f"PCK@10cm {100 * acc['pck']:.1f} %")  # fmt: skip
     return _exit_code(done, len(errors))
@@ -301,6 +373,43 @@ def build_parser() -> argparse.ArgumentParser:
         "shape values): BodyModel() with .shape set to it gives the frame's joints back "
         "from its 'pose'. Exit code 0: every frame estimated; 1: some failed; "
         "2: none could be (or the input could not be opened)."
+    )
+
+    es = sub.add_parser("estimate-stereo", help="poses of rectified stereo pairs")
+    es.add_argument(
+        "input",
+        help=".npz of pairs (keys left, right, intrinsics, baseline, optional left_bg, "
+        "right_bg), a folder of pairs (left/ and right/, or *left* beside *right* images), "
+        "or the left image",
+    )
+    es.add_argument("right", nargs="?", help="the right image, when INPUT is the left one")
+    es.add_argument("--out", required=True, help="output .npz (joints, pose, confidence)")
+    es.add_argument("--viz", help="folder for a picture of each pair")
+    es.add_argument("--jsonl", help="also write one JSON line per pair here")
+    es.add_argument(
+        "--track",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="track through the pairs (default) or estimate each pair",
+    )
+    es.add_argument("--baseline", type=float, help="camera distance, metres (a .npz has it)")
+    es.add_argument("--doffs", type=float, help="disparity offset, pixels (default 0)")
+    es.add_argument(
+        "--intrinsics", type=float, nargs=4, metavar=("FX", "FY", "CX", "CY"),
+        help="the left camera's pinhole intrinsics in pixels (a .npz carries its own)",
+    )  # fmt: skip
+    es.add_argument("--camera", metavar="NAME", choices=_presets(), help=_CAMERA_HELP)
+    es.add_argument(
+        "--background", nargs=2, metavar=("LEFT", "RIGHT"),
+        help="the empty scene's pair (optional: the person is found without one)",
+    )  # fmt: skip
+    es.add_argument("--max-disparity", type=int, help="largest disparity searched")
+    es.set_defaults(func=_cmd_estimate_stereo)
+    es.epilog = (
+        "Each pair is matched (Growing Correspondence Seeds), its disparity becomes depth, "
+        "and the depth goes through the same pipeline as 'estimate'; the output has the "
+        "same keys. A pair that cannot be read or estimated is reported and recorded as "
+        "NaN. Exit code 0: every pair estimated; 1: some failed; 2: none could be."
     )
 
     bat = sub.add_parser("batch", help="many sequences on a Dask cluster, resumable")

@@ -98,7 +98,8 @@ def save_mesh(path: PathLike, model: BodyModel, pose: np.ndarray, *, y_up: bool 
     if suffix == "gltf":
         from trimesh.exchange.gltf import export_gltf
 
-        files = export_gltf(mesh.scene(), embed_buffers=True)
+        # trimesh's exporter is untyped: it returns {file name: bytes}.
+        files = export_gltf(mesh.scene(), embed_buffers=True)  # type: ignore[no-untyped-call]
         with open(path, "wb") as f:
             f.write(files["model.gltf"])
     else:

@@ -179,7 +179,7 @@ def _drawable(a: np.ndarray, b: np.ndarray, h: int, w: int) -> bool:
     near the camera plane projects far outside the picture)."""
     if not np.isfinite([*a, *b]).all():
         return False
-    return max(abs(b[0] - a[0]), abs(b[1] - a[1])) <= 4 * (h + w)
+    return bool(max(abs(b[0] - a[0]), abs(b[1] - a[1])) <= 4 * (h + w))
 
 
 def draw_skeleton(
@@ -213,9 +213,9 @@ def draw_skeleton(
             side = _JOINT_SIDE[b] if _JOINT_SIDE[b] != "C" else _JOINT_SIDE[a]
             draw.line([tuple(uv[a]), tuple(uv[b])], fill=SIDE_COLORS[side], width=width)
     r = 1.0 + 0.5 * width
-    for j in range(len(uv)):
-        if _drawable(uv[j], uv[j], h, w) and -r <= uv[j][0] < w + r and -r <= uv[j][1] < h + r:
-            u, v = uv[j]
+    for p in uv:
+        if _drawable(p, p, h, w) and -r <= p[0] < w + r and -r <= p[1] < h + r:
+            u, v = p
             draw.ellipse([u - r, v - r, u + r, v + r], fill=(255, 255, 255))
     return np.asarray(picture, dtype=np.uint8).copy()
 
