@@ -813,6 +813,12 @@ class PipelineConfig:
         A re-check switches when it explains the depth better by this share. Default 0.1.
     pose_prior_weight
         Weight of the rest-pose penalty where poses compete. Default 0.005.
+    size_range, size_step
+        From scratch, unless the estimator or tracker was given a ``model``, the best
+        fit is refitted with the body scaled by 1 ± k·``size_step`` up to
+        ± ``size_range`` and the size whose body explains the depth best is kept
+        (``result.shape``); a tracker does so on its first frame and calibrates the
+        shape from there. 0 turns it off. Default 0.15 and 0.05.
     calibration_frames, calibration_every, calibration_prior_weight, calibration_rounds
         Tracking: shape calibration over this many usable frames (0 = never), every
         this many, with this prior weight and rounds. Default 8, 1, 1e5 and 3.

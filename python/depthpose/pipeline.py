@@ -79,7 +79,9 @@ class PoseEstimator:
         resolution are processed at a reduced working resolution; results come back in
         the input's pixel grid.
     model
-        The body model (default ``BodyModel()``, 1.75 m reference proportions).
+        The subject's body, when its shape is known. Without it the body is
+        ``BodyModel()`` (1.75 m reference proportions) scaled, frame by frame, to the
+        size that explains the depth best (``config.size_range``).
     templates
         A :class:`~depthpose.templates.TemplateDatabase` (default: the cached default
         database, built on first use).
@@ -173,6 +175,8 @@ class PoseTracker:
     Parameters are those of :class:`PoseEstimator`, and
     ``calibrate``: fit the subject's body shape over the first usable frames (None:
     when no ``model`` is given; a given model is taken as the subject's known shape).
+    Without a ``model`` the body's size is found on the first frame and the shape is
+    calibrated from there.
 
     A tracked frame starts from the previous pose moved on by a damped velocity, with a
     prior toward that prediction. When the fit explains too little of the person or the

@@ -60,6 +60,13 @@ pub struct PipelineConfig {
     /// rest pose). Where the depth cannot tell where a limb is (hidden behind the
     /// torso), it prefers the ordinary pose.
     pub pose_prior_weight: f64,
+    /// From scratch, when the subject's shape is not given, the best fit is also
+    /// refitted with the body scaled by 1 ± k·`size_step` up to ± `size_range`, and the
+    /// size explaining the depth best is kept ([`super::size`]; 0 = never). A tracker
+    /// does so on its first frame and calibrates the shape from there.
+    pub size_range: f64,
+    /// ... in steps of this share of the model's size.
+    pub size_step: f64,
     /// The fits' settings.
     pub fit: FitConfig,
     /// Shape calibration: the body shape is fitted once to this many usable frames and
@@ -104,6 +111,8 @@ impl Default for PipelineConfig {
             lost_hypotheses: 8,
             switch_margin: 0.1,
             pose_prior_weight: 0.005,
+            size_range: 0.15,
+            size_step: 0.05,
             fit: FitConfig::default(),
             calibration_frames: 8,
             calibration_every: 1,
@@ -186,6 +195,8 @@ impl PipelineConfig {
             false,
             "calibration_prior_weight",
         )?;
+        real(self.size_range, 0.0, 0.5, false, "size_range")?;
+        real(self.size_step, 0.01, 0.5, false, "size_step")?;
         real(self.working_focal, 1.0, 1e6, false, "working_focal")?;
         self.fit.validate()?;
         self.segment.validate()

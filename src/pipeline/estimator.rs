@@ -39,6 +39,19 @@ pub struct Estimator {
     config: PipelineConfig,
     /// The empty scene at the working resolution.
     background: Option<Vec<f32>>,
+    /// Whether a search from scratch also finds the body's size ([`super::size`]).
+    size_search: bool,
+}
+
+/// A fit on its way into a [`PoseResult`].
+pub(crate) struct Fitted<'m> {
+    pub fit: FitResult,
+    /// Its depth discrepancy.
+    pub discrepancy: f64,
+    /// The body it was fitted with.
+    pub model: &'m BodyModel,
+    /// The body's part labels rendered at the fit's pose, when a caller has them.
+    pub rendered: Option<Vec<i16>>,
 }
 
 /// A frame at the working resolution: its depth, the person's pixels and how they
@@ -78,7 +91,20 @@ impl Estimator {
             templates,
             config,
             background,
+            size_search: true,
         })
+    }
+
+    /// This estimator, with or without the size search from scratch (on by default;
+    /// off when the caller knows the subject's shape).
+    pub fn with_size_search(mut self, on: bool) -> Self {
+        self.size_search = on;
+        self
+    }
+
+    /// Whether a search from scratch also finds the body's size.
+    pub fn size_search(&self) -> bool {
+        self.size_search && self.config.size_range > 0.0
     }
 
     pub fn model(&self) -> &BodyModel {
@@ -113,9 +139,16 @@ impl Estimator {
         let mut frame = self.prepare(depth, mask, None)?;
         clock.lap("foreground");
         let hypotheses = self.config.hypotheses;
-        let (best, score) = self.search(&mut frame, &[], hypotheses, true, Some(&mut clock))?;
+        let (best, score) = self.search(&mut frame, &[], hypotheses, false, Some(&mut clock))?;
+        let sized = self.fit_size(&mut frame, best, score, self.size_search())?;
         clock.lap("fit");
-        Ok(self.result(&mut frame, best, score, Source::Templates, clock, None))
+        let fitted = Fitted {
+            fit: sized.fit,
+            discrepancy: sized.score,
+            model: &sized.model,
+            rendered: None,
+        };
+        Ok(self.result(&mut frame, fitted, Source::Templates, clock))
     }
 
     /// The frame at the working resolution with the person's pixels: `mask` (the
@@ -161,7 +194,11 @@ impl Estimator {
     }
 
     /// The frame's fit problem for `config`'s stride, built on first use.
-    fn problem<'f>(&self, frame: &'f mut Frame, config: &FitConfig) -> Result<&'f mut FitProblem> {
+    pub(super) fn problem<'f>(
+        &self,
+        frame: &'f mut Frame,
+        config: &FitConfig,
+    ) -> Result<&'f mut FitProblem> {
         let k = match frame
             .problems
             .iter()
@@ -337,38 +374,45 @@ impl Estimator {
             best_score = final_scores[k];
             best = finals.into_iter().nth(k).expect("k indexes the finals");
             if label {
-                best = self.label_all(frame, best)?;
+                best = self.label_all(frame, best, &self.model)?;
             }
         }
         Ok((best, best_score))
     }
 
-    /// `fit`, a final of [`Self::search`], labelled at every pixel.
-    pub(crate) fn label_all(&self, frame: &mut Frame, fit: FitResult) -> Result<FitResult> {
+    /// `fit`, a final of [`Self::search`] made with `model`, labelled at every pixel.
+    pub(crate) fn label_all(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        model: &BodyModel,
+    ) -> Result<FitResult> {
         let config = self.config.fit_with(None, self.config.final_stride, None);
         if !config.label_all_pixels {
             return Ok(fit);
         }
         let problem = self.problem(frame, &config)?;
-        problem.label_all(&self.model, &fit, None)
+        problem.label_all(model, &fit, None)
     }
 
     /// The result of a frame: the fit's pose, its labels and the person's pixels at the
-    /// input's size, the joints' confidence.
-    /// `rendered`: the body's part labels rendered at the fit's pose, when a caller has
-    /// them already (else rendered here). The fit's labels at the working resolution
-    /// stay in `frame.labels`.
+    /// input's size, the joints' confidence, the shape of the body fitted. The fit's
+    /// labels at the working resolution stay in `frame.labels`.
     pub(crate) fn result(
         &self,
         frame: &mut Frame,
-        fit: FitResult,
-        discrepancy: f64,
+        fitted: Fitted,
         source: Source,
         clock: Clock,
-        rendered: Option<Vec<i16>>,
     ) -> PoseResult {
         let camera = &self.resolution.working;
-        let rendered = rendered.unwrap_or_else(|| self.model.render_depth(&fit.pose, camera).1);
+        let Fitted {
+            fit,
+            discrepancy,
+            model,
+            rendered,
+        } = fitted;
+        let rendered = rendered.unwrap_or_else(|| model.render_depth(&fit.pose, camera).1);
         let confidence = joint_confidence(&fit.joints, &fit.labels, &rendered, camera);
         let labels = self.resolution.upsample(&fit.labels, -1);
         let mask = self.resolution.upsample(&frame.mask, false);
@@ -377,7 +421,7 @@ impl Estimator {
         PoseResult {
             pose: fit.pose,
             joints: fit.joints,
-            shape: self.model.shape,
+            shape: model.shape,
             labels,
             mask,
             energy: fit.energy,

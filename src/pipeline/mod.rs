@@ -15,6 +15,7 @@ pub mod hypotheses;
 pub mod orientation;
 pub mod resolution;
 pub mod result;
+pub mod size;
 pub mod stereo;
 pub mod tracker;
 
@@ -22,6 +23,7 @@ pub use config::PipelineConfig;
 pub use estimator::Estimator;
 pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs, turn_around};
 pub use result::{PoseResult, SegmentSummary, Source, Timings};
+pub use size::{relative_sizes, SizedFit};
 pub use stereo::{StereoDepth, StereoDepthConfig, StereoPipeline, StereoPose, StereoRig};
 pub use tracker::Tracker;
 

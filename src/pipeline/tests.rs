@@ -56,9 +56,13 @@ fn walking(model: &BodyModel, t: f64) -> Pose {
 /// The room with the body rendered into it at walking phase `t`: the camera, the depth
 /// image and the pose.
 pub(crate) fn room_with_body(t: f64) -> (Camera, Vec<f32>, Pose) {
+    room_with(&BodyModel::default(), t)
+}
+
+/// [`room_with_body`] with the body `model`.
+pub(crate) fn room_with(model: &BodyModel, t: f64) -> (Camera, Vec<f32>, Pose) {
     let camera = Camera::itop();
-    let model = BodyModel::default();
-    let pose = walking(&model, t);
+    let pose = walking(model, t);
     let mut scene = room(&camera);
     let (body, _) = model.render_depth(&pose, &camera);
     for (s, &b) in scene.iter_mut().zip(&body) {
@@ -70,7 +74,12 @@ pub(crate) fn room_with_body(t: f64) -> (Camera, Vec<f32>, Pose) {
 }
 
 fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {
-    let truth = BodyModel::default().joints(pose);
+    mean_joint_error_of(&BodyModel::default(), a, pose)
+}
+
+/// The mean distance of `a`'s joints from those of `model` at `pose`.
+pub(crate) fn mean_joint_error_of(model: &BodyModel, a: &PoseResult, pose: &Pose) -> f64 {
+    let truth = model.joints(pose);
     a.joints
         .iter()
         .zip(&truth)
@@ -79,7 +88,7 @@ fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {
         / truth.len() as f64
 }
 
-fn estimator(camera: &Camera, config: PipelineConfig) -> Estimator {
+pub(crate) fn estimator(camera: &Camera, config: PipelineConfig) -> Estimator {
     Estimator::new(
         camera,
         BodyModel::default(),

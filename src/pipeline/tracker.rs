@@ -8,13 +8,14 @@
 //! also runs on a tracked frame, and the track switches when a hypothesis explains the
 //! depth clearly better.
 //!
-//! **Shape calibration.** Unless told the shape, the tracker collects usable frames (any
-//! but a track's first whose fit explains enough of the person) and, once it has
-//! enough, fits the body shape to them all together ([`crate::fit::fit_shape`]); it
-//! tracks with that shape from then on. A calibration that fails leaves the shape as it
-//! was and is not retried.
+//! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
+//! first frame ([`super::size`]). It then collects usable frames (any but a track's
+//! first whose fit explains enough of the person) and, once it has enough, fits the
+//! body shape to them all together ([`crate::fit::fit_shape`]), starting from the sized
+//! body; it tracks with that shape from then on. A calibration that fails leaves the
+//! shape as it was and is not retried.
 
-use super::estimator::{Estimator, Frame};
+use super::estimator::{Estimator, Fitted, Frame};
 use super::hypotheses::swap_limbs;
 use super::result::{Clock, PoseResult, Source};
 use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
@@ -59,6 +60,8 @@ pub struct Tracker {
     estimator: Estimator,
     base_model: BodyModel,
     calibrate: bool,
+    /// The body's size relative to the base model, once found (on the first frame).
+    size: Option<f64>,
     track: Track,
     calibration: Calibration,
     frames: usize,
@@ -77,6 +80,7 @@ impl Tracker {
             estimator,
             base_model,
             calibrate,
+            size: None,
             track: Track::default(),
             calibration: Calibration::default(),
             frames: 0,
@@ -113,7 +117,17 @@ impl Tracker {
 
     /// The calibrated shape factors relative to the base model (None before).
     pub fn shape_factors(&self) -> Option<[f64; NUM_SHAPE_FACTORS]> {
-        self.calibration.result.as_ref().map(|r| r.factors)
+        let size = self.size.unwrap_or(1.0);
+        self.calibration
+            .result
+            .as_ref()
+            .map(|r| r.factors.map(|f| f * size))
+    }
+
+    /// The body's size relative to the base model found on the first frame (None
+    /// before, or when the size is not searched).
+    pub fn size(&self) -> Option<f64> {
+        self.size
     }
 
     /// Forgets the track. The calibrated shape is kept (the same subject) unless
@@ -125,6 +139,7 @@ impl Tracker {
         if shape {
             self.calibration = Calibration::default();
             self.estimator.set_model(self.base_model.clone());
+            self.size = None;
             self.frames = 0;
         }
     }
@@ -150,16 +165,25 @@ impl Tracker {
         let (res, frame, switched) = match self.track.previous {
             None => {
                 let mut clock = Clock::start();
-                let mut frame = self.estimator.prepare(depth, mask, None)?;
+                let est = &self.estimator;
+                let mut frame = est.prepare(depth, mask, None)?;
                 clock.lap("foreground");
-                let n = self.estimator.config().hypotheses;
-                let (best, score) =
-                    self.estimator
-                        .search(&mut frame, &[], n, true, Some(&mut clock))?;
+                let n = est.config().hypotheses;
+                let (best, score) = est.search(&mut frame, &[], n, false, Some(&mut clock))?;
+                let search_size = self.size.is_none() && est.size_search();
+                let sized = est.fit_size(&mut frame, best, score, search_size)?;
                 clock.lap("fit");
-                let res =
-                    self.estimator
-                        .result(&mut frame, best, score, Source::Templates, clock, None);
+                let fitted = Fitted {
+                    fit: sized.fit,
+                    discrepancy: sized.score,
+                    model: &sized.model,
+                    rendered: None,
+                };
+                let res = est.result(&mut frame, fitted, Source::Templates, clock);
+                if search_size {
+                    self.size = Some(sized.scale);
+                    self.estimator.set_model(sized.model);
+                }
                 (res, frame, true)
             }
             Some(_) => self.tracked(depth, mask)?,
@@ -212,14 +236,13 @@ impl Tracker {
         self.track.since_check += 1;
         let recheck = cfg.recheck_every > 0 && self.track.since_check >= cfg.recheck_every;
         if !(lost || recheck) {
-            let res = est.result(
-                &mut frame,
+            let fitted = Fitted {
                 fit,
-                score,
-                Source::Tracking,
-                clock,
-                Some(rendered),
-            );
+                discrepancy: score,
+                model: est.model(),
+                rendered: Some(rendered),
+            };
+            let res = est.result(&mut frame, fitted, Source::Tracking, clock);
             return Ok((res, frame, false));
         }
         self.track.since_check = 0;
@@ -239,20 +262,25 @@ impl Tracker {
         let rank_track = score + est.penalty(&pose);
         let switch = rank_best < rank_track * (1.0 - margin);
         if switch {
-            let best = est.label_all(&mut frame, best)?;
+            let best = est.label_all(&mut frame, best, est.model())?;
             clock.lap("search");
-            let res = est.result(&mut frame, best, best_score, Source::Templates, clock, None);
+            let fitted = Fitted {
+                fit: best,
+                discrepancy: best_score,
+                model: est.model(),
+                rendered: None,
+            };
+            let res = est.result(&mut frame, fitted, Source::Templates, clock);
             Ok((res, frame, true))
         } else {
             clock.lap("search");
-            let res = est.result(
-                &mut frame,
+            let fitted = Fitted {
                 fit,
-                score,
-                Source::Tracking,
-                clock,
-                Some(rendered),
-            );
+                discrepancy: score,
+                model: est.model(),
+                rendered: Some(rendered),
+            };
+            let res = est.result(&mut frame, fitted, Source::Tracking, clock);
             Ok((res, frame, false))
         }
     }
@@ -326,7 +354,9 @@ impl Tracker {
             ..ShapeConfig::default()
         };
         let camera = self.estimator.resolution().working;
-        let outcome = fit_shape(&frames, &camera, &self.base_model, &poses, &shape_config);
+        // From the body at the size found on the first frame (the base model without).
+        let sized = self.estimator.model();
+        let outcome = fit_shape(&frames, &camera, sized, &poses, &shape_config);
         self.finish_calibration(outcome);
         let ms = start.elapsed().as_secs_f64() * 1e3;
         res.timings.stages.push(("calibration", ms));

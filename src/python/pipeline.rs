@@ -101,6 +101,8 @@ impl PyPipelineConfig {
                     "lost_hypotheses" => c.lost_hypotheses = int_field(&value, n)?,
                     "switch_margin" => c.switch_margin = real_field(&value, n)?,
                     "pose_prior_weight" => c.pose_prior_weight = real_field(&value, n)?,
+                    "size_range" => c.size_range = real_field(&value, n)?,
+                    "size_step" => c.size_step = real_field(&value, n)?,
                     "calibration_frames" => c.calibration_frames = int_field(&value, n)?,
                     "calibration_every" => c.calibration_every = int_field(&value, n)?,
                     "calibration_prior_weight" => {
@@ -159,6 +161,8 @@ impl PyPipelineConfig {
         d.set_item("lost_hypotheses", c.lost_hypotheses)?;
         d.set_item("switch_margin", c.switch_margin)?;
         d.set_item("pose_prior_weight", c.pose_prior_weight)?;
+        d.set_item("size_range", c.size_range)?;
+        d.set_item("size_step", c.size_step)?;
         d.set_item("calibration_frames", c.calibration_frames)?;
         d.set_item("calibration_every", c.calibration_every)?;
         d.set_item("calibration_prior_weight", c.calibration_prior_weight)?;
@@ -373,6 +377,8 @@ pub(super) struct EstimatorParts {
     pub templates: std::sync::Arc<crate::templates::TemplateDatabase>,
     pub model: BodyModel,
     pub config: PipelineConfig,
+    /// No model given: the body's size is searched from scratch.
+    pub size_search: bool,
 }
 
 impl EstimatorParts {
@@ -400,6 +406,7 @@ impl EstimatorParts {
             templates,
             model,
             config,
+            size_search: a.model.is_none(),
         })
     }
 
@@ -411,7 +418,8 @@ impl EstimatorParts {
             self.templates,
             self.config,
             background,
-        )?)
+        )?
+        .with_size_search(self.size_search))
     }
 }
 
