@@ -35,7 +35,7 @@ fn room(camera: &Camera) -> Vec<f32> {
 }
 
 /// A walking pose at phase `t` (radians), standing on the floor 3 m away.
-fn walking(model: &BodyModel, t: f64) -> Pose {
+pub(crate) fn walking(model: &BodyModel, t: f64) -> Pose {
     let mut p = BodyModel::neutral_pose();
     p[2] = 3.0;
     p[16] = 0.4 * t.sin(); // right hip flexion
@@ -63,14 +63,21 @@ pub(crate) fn room_with_body(t: f64) -> (Camera, Vec<f32>, Pose) {
 pub(crate) fn room_with(model: &BodyModel, t: f64) -> (Camera, Vec<f32>, Pose) {
     let camera = Camera::itop();
     let pose = walking(model, t);
+    let scene = room_posed(model, &pose);
+    (camera, scene, pose)
+}
+
+/// The room seen by [`Camera::itop`] with the body `model` rendered into it at `pose`.
+pub(crate) fn room_posed(model: &BodyModel, pose: &Pose) -> Vec<f32> {
+    let camera = Camera::itop();
     let mut scene = room(&camera);
-    let (body, _) = model.render_depth(&pose, &camera);
+    let (body, _) = model.render_depth(pose, &camera);
     for (s, &b) in scene.iter_mut().zip(&body) {
         if b > 0.0 && b < *s {
             *s = b;
         }
     }
-    (camera, scene, pose)
+    scene
 }
 
 fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {

@@ -4,7 +4,8 @@
 //! constant-velocity model, with a prior toward that prediction. The track is lost when
 //! the fitted body explains too little of the person or the depth much worse than
 //! lately; a lost frame runs the template search (with the tracked pose and its
-//! swapped-limbs pose among the starts) and keeps its best. Every few frames the search
+//! readings with left and right exchanged — whole body, legs only, arms only — among
+//! the starts) and keeps its best. Every few frames the search
 //! also runs on a tracked frame, and the track switches when a hypothesis explains the
 //! depth clearly better.
 //!
@@ -20,6 +21,7 @@ use super::hypotheses::swap_limbs;
 use super::result::{Clock, PoseResult, Source};
 use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
 use crate::error::{Error, Result};
+use crate::fit::start::limbs_swapped;
 use crate::fit::{fit_shape, PosePrior, ShapeConfig, ShapeFrame, ShapeResult};
 use crate::segment::SegmentHint;
 use std::collections::VecDeque;
@@ -255,8 +257,15 @@ impl Tracker {
         } else {
             cfg.recheck_hypotheses
         };
-        let (best, best_score) =
-            est.search(&mut frame, &[pose, swap_limbs(&pose)], n, false, None)?;
+        // The tracked pose and its readings with the sides exchanged, whole body, legs
+        // only or arms only: a side view's near and far limbs look alike.
+        let own = [
+            pose,
+            swap_limbs(&pose),
+            limbs_swapped(&pose, true, false),
+            limbs_swapped(&pose, false, true),
+        ];
+        let (best, best_score) = est.search(&mut frame, &own, n, false, None)?;
         let margin = if lost { 0.0 } else { cfg.switch_margin };
         let rank_best = best_score + est.penalty(&best.pose);
         let rank_track = score + est.penalty(&pose);
@@ -397,9 +406,53 @@ fn error_text(e: &Error) -> String {
 
 #[cfg(test)]
 mod tests {
-    use super::super::tests::{default_templates, room_with_body};
+    use super::super::tests::{
+        default_templates, mean_joint_error_of, room_posed, room_with_body, walking,
+    };
     use super::*;
+    use crate::camera::Camera;
     use crate::pipeline::PipelineConfig;
+
+    #[test]
+    fn a_side_view_tracked_with_its_legs_exchanged_is_recovered() {
+        // A body walking across the view, seen from its side, mid-stride: its near and
+        // far legs differ only in depth.
+        let model = BodyModel::default();
+        let side = |t: f64| {
+            let mut p = walking(&model, t);
+            p[param_root_yaw()] = std::f64::consts::FRAC_PI_2;
+            p
+        };
+        let config = PipelineConfig {
+            calibration_frames: 0,
+            recheck_every: 1,
+            ..PipelineConfig::default()
+        };
+        let est = Estimator::new(
+            &Camera::itop(),
+            model.clone(),
+            default_templates(),
+            config,
+            None,
+        )
+        .unwrap();
+        let mut tracker = Tracker::new(est, false);
+        let pose = side(1.2);
+        let first = crate::pool::on_worker(|| tracker.update(&room_posed(&model, &pose), None));
+        assert!(mean_joint_error_of(&model, &first.unwrap(), &pose) < 0.05);
+        // The track goes on with the legs exchanged, as after a wrong step.
+        let previous = tracker.track.previous.unwrap();
+        tracker.track.previous = Some(limbs_swapped(&previous, true, false));
+        tracker.track.before = None;
+        let pose = side(1.25);
+        let r = crate::pool::on_worker(|| tracker.update(&room_posed(&model, &pose), None));
+        let err = mean_joint_error_of(&model, &r.unwrap(), &pose);
+        assert!(err < 0.05, "mean joint error {err}");
+    }
+
+    fn param_root_yaw() -> usize {
+        crate::body::param::ROOT_R + 1
+    }
 
     #[test]
     fn a_failed_calibration_keeps_the_model_and_is_not_retried() {
