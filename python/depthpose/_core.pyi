@@ -785,6 +785,11 @@ class PipelineConfig:
         left/right-swapped and mirrored-view hypotheses). Default 4.
     hypotheses
         Hypotheses, ranked by depth discrepancy, refined by brief EM fits. Default 20.
+    limb_poses
+        From scratch (``estimate`` and a track's first frame), the search's best fit
+        also tries each limb in a wider set of poses (arms overhead or in a V, kicks, a
+        leg out sideways, a crouch, …), one limb at a time, and keeps a limb pose whose
+        refitted body explains the depth better. Default True.
     candidate_iterations
         EM iterations of each brief fit. Default 2.
     finals

@@ -17,6 +17,10 @@ pub struct PipelineConfig {
     /// The template search also runs on the view that makes a lying or leaning body
     /// upright, and upside down.
     pub any_roll: bool,
+    /// From scratch, the search's best fit also tries each limb in the poses of
+    /// [`super::limbs`] (arms overhead, kicks, …), kept where they explain the depth
+    /// better. (A tracked body keeps its limbs: its motion tells them better.)
+    pub limb_poses: bool,
     /// EM iterations of each hypothesis before choosing.
     pub candidate_iterations: usize,
     /// The best this many candidate fits are refined fully, in parallel, and the best of
@@ -93,6 +97,7 @@ impl Default for PipelineConfig {
             candidates: 4,
             hypotheses: 20,
             back_views: true,
+            limb_poses: true,
             any_roll: true,
             candidate_iterations: 2,
             finals: 3,

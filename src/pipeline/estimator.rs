@@ -140,6 +140,7 @@ impl Estimator {
         clock.lap("foreground");
         let hypotheses = self.config.hypotheses;
         let (best, score) = self.search(&mut frame, &[], hypotheses, false, Some(&mut clock))?;
+        let (best, score) = self.repose_limbs(&mut frame, best, score)?;
         let sized = self.fit_size(&mut frame, best, score, self.size_search())?;
         clock.lap("fit");
         let fitted = Fitted {
@@ -373,9 +374,9 @@ impl Estimator {
         if brief || final_ranking[k] <= best_rank {
             best_score = final_scores[k];
             best = finals.into_iter().nth(k).expect("k indexes the finals");
-            if label {
-                best = self.label_all(frame, best, &self.model)?;
-            }
+        }
+        if label {
+            best = self.label_all(frame, best, &self.model)?;
         }
         Ok((best, best_score))
     }

@@ -12,6 +12,7 @@ pub mod confidence;
 pub mod config;
 pub mod estimator;
 pub mod hypotheses;
+pub mod limbs;
 pub mod orientation;
 pub mod resolution;
 pub mod result;

@@ -77,9 +77,10 @@ impl Estimator {
         };
         if steps > 0 {
             let mut rank = best.score + self.penalty(&best.fit.pose);
-            // One EM from the fitted pose per size: it is on the body already, so the
-            // recentred start of a fresh fit would repeat it.
-            let mut config = cfg.fit_with(cfg.final_iterations, cfg.final_stride, Some(false));
+            // One short EM (a tracked frame's) from the fitted pose per size: it is on
+            // the body already, so the recentred start of a fresh fit would repeat it.
+            let mut config =
+                cfg.fit_with(Some(cfg.track_iterations), cfg.final_stride, Some(false));
             config.recentred_start = false;
             config.swapped_limb_starts = false;
             let start = best.fit.pose;

@@ -172,6 +172,7 @@ impl Tracker {
                 clock.lap("foreground");
                 let n = est.config().hypotheses;
                 let (best, score) = est.search(&mut frame, &[], n, false, Some(&mut clock))?;
+                let (best, score) = est.repose_limbs(&mut frame, best, score)?;
                 let search_size = self.size.is_none() && est.size_search();
                 let sized = est.fit_size(&mut frame, best, score, search_size)?;
                 clock.lap("fit");

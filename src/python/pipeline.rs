@@ -78,6 +78,7 @@ impl PyPipelineConfig {
                     "hypotheses" => c.hypotheses = int_field(&value, n)?,
                     "back_views" => c.back_views = bool_field(&value, n)?,
                     "any_roll" => c.any_roll = bool_field(&value, n)?,
+                    "limb_poses" => c.limb_poses = bool_field(&value, n)?,
                     "candidate_iterations" => c.candidate_iterations = int_field(&value, n)?,
                     "finals" => c.finals = int_field(&value, n)?,
                     "final_iterations" => {
@@ -144,6 +145,7 @@ impl PyPipelineConfig {
         d.set_item("hypotheses", c.hypotheses)?;
         d.set_item("back_views", c.back_views)?;
         d.set_item("any_roll", c.any_roll)?;
+        d.set_item("limb_poses", c.limb_poses)?;
         d.set_item("candidate_iterations", c.candidate_iterations)?;
         d.set_item("finals", c.finals)?;
         d.set_item("final_iterations", c.final_iterations)?;

@@ -1,0 +1,210 @@
+//! Limb hypotheses: each limb of a fit tried in the poses people take.
+//!
+//! The template catalogue combines four poses per limb, so a fit found from it can miss
+//! a limb whose pose is not among them (an arm overhead, a kick, a leg out sideways)
+//! and the EM, being local, rarely moves the limb that far. Here each limb of the fit
+//! is set in turn to each pose of a wider set, the rest of the body kept, and the limb
+//! pose whose body explains the observed depth best (depth discrepancy plus rest-pose
+//! penalty, as everywhere poses compete) is kept when it beats the limb as fitted. A
+//! body changed so is refitted, and the refit replaces the fit only when it explains
+//! the depth better. Rendering a pose costs far less than fitting one, so the whole
+//! set is scored and one short EM is run.
+
+use super::estimator::{Estimator, Frame};
+use crate::body::{param, Pose};
+use crate::error::Result;
+use crate::fit::FitResult;
+
+/// Shoulder flexion, abduction, rotation and elbow flexion of the arm poses tried.
+pub const ARM_POSES: [[f64; 4]; 11] = [
+    [0.0, 0.12, 0.0, 0.1],  // hanging
+    [0.0, 1.45, 0.0, 0.1],  // out sideways
+    [1.45, 0.1, 0.0, 0.1],  // forward, pointing
+    [0.8, 0.1, 0.0, 0.1],   // forward and down
+    [0.25, 0.35, 0.0, 1.7], // forearm forward and up
+    [2.9, 0.2, 0.0, 0.1],   // overhead
+    [0.3, 2.4, 0.0, 0.1],   // raised in a V
+    [-0.7, 0.1, 0.0, 0.2],  // back
+    [0.9, 0.3, 0.0, 2.3],   // guard, fist by the face
+    [1.4, -0.5, 0.0, 0.3],  // across the body
+    [0.0, 1.45, 0.0, 1.6],  // out sideways, forearm bent
+];
+
+/// Hip flexion, abduction and knee flexion of the leg poses tried.
+pub const LEG_POSES: [[f64; 3]; 10] = [
+    [0.0, 0.04, 0.0],   // standing
+    [0.45, 0.04, 0.15], // step forward
+    [-0.35, 0.04, 0.4], // step back
+    [1.4, 0.04, 1.6],   // knee raised
+    [1.5, 0.04, 0.1],   // kick forward
+    [2.1, 0.04, 0.05],  // high kick
+    [0.1, 1.2, 0.1],    // out sideways
+    [-0.6, 0.04, 0.2],  // kick back
+    [0.0, 0.04, 1.6],   // heel raised behind
+    [1.8, 0.2, 2.4],    // crouched
+];
+
+/// The limbs: first angle of each in the pose, and whether it is an arm.
+const LIMBS: [(usize, bool); 4] = [
+    (param::R_SHOULDER, true),
+    (param::L_SHOULDER, true),
+    (param::R_HIP, false),
+    (param::L_HIP, false),
+];
+
+/// `pose` with the limb whose angles start at `first` set to `angles`.
+fn with_limb(pose: &Pose, first: usize, angles: &[f64]) -> Pose {
+    let mut out = *pose;
+    out[first..first + angles.len()].copy_from_slice(angles);
+    out
+}
+
+/// `pose` with its limbs set, one after the other, to the pose of the set that ranks
+/// best by `rank` when it ranks below the current one. Returns the pose, its rank and
+/// whether any limb changed.
+pub(crate) fn best_limbs(
+    pose: &Pose,
+    current: f64,
+    mut rank: impl FnMut(&[Pose]) -> Result<Vec<f64>>,
+) -> Result<(Pose, f64, bool)> {
+    let (mut pose, mut best, mut changed) = (*pose, current, false);
+    for (first, arm) in LIMBS {
+        let starts: Vec<Pose> = if arm {
+            ARM_POSES
+                .iter()
+                .map(|a| with_limb(&pose, first, a))
+                .collect()
+        } else {
+            LEG_POSES
+                .iter()
+                .map(|a| with_limb(&pose, first, a))
+                .collect()
+        };
+        let ranks = rank(&starts)?;
+        for (start, r) in starts.into_iter().zip(ranks) {
+            if r < best {
+                (pose, best, changed) = (start, r, true);
+            }
+        }
+    }
+    Ok((pose, best, changed))
+}
+
+impl Estimator {
+    /// `fit` (with `score`, its depth discrepancy) with its limbs re-posed where that
+    /// explains the depth better (see the module docs). Returns the fit kept and its
+    /// discrepancy.
+    pub(crate) fn repose_limbs(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        score: f64,
+    ) -> Result<(FitResult, f64)> {
+        if !self.config().limb_poses {
+            return Ok((fit, score));
+        }
+        let current = score + self.penalty(&fit.pose);
+        let (start, _, changed) = best_limbs(&fit.pose, current, |poses| {
+            let scores = self.discrepancies(frame, poses)?;
+            Ok(scores
+                .iter()
+                .zip(poses)
+                .map(|(s, p)| s + self.penalty(p))
+                .collect())
+        })?;
+        if !changed {
+            return Ok((fit, score));
+        }
+        let cfg = self.config();
+        // A tracked frame's budget: the rest of the body is fitted already.
+        let mut config = cfg.fit_with(Some(cfg.track_iterations), cfg.final_stride, Some(false));
+        config.recentred_start = false;
+        config.swapped_limb_starts = false;
+        let refit = self
+            .fits(frame, &config, &[start], None, None)?
+            .pop()
+            .expect("one fit");
+        let (refit_score, _) = self.discrepancy(frame, &refit.pose);
+        if refit_score + self.penalty(&refit.pose) < current {
+            Ok((refit, refit_score))
+        } else {
+            Ok((fit, score))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::BodyModel;
+    use crate::camera::Camera;
+    use crate::pipeline::tests::{estimator, mean_joint_error_of, room_posed, walking};
+    use crate::pipeline::PipelineConfig;
+
+    #[test]
+    fn a_kick_and_an_arm_overhead_are_found_from_scratch() {
+        // Neither pose is in the template catalogue: a leg kicking forward at hip
+        // height and an arm straight up, seen from the front at 3 m.
+        let model = BodyModel::default();
+        let mut pose = walking(&model, 0.0);
+        pose = with_limb(&pose, param::R_HIP, &[1.5, 0.04, 0.1]);
+        pose = with_limb(&pose, param::L_SHOULDER, &[2.9, 0.2, 0.0, 0.1]);
+        let depth = room_posed(&model, &pose);
+        let camera = Camera::itop();
+        let on = estimator(&camera, PipelineConfig::default()).with_size_search(false);
+        let off = estimator(
+            &camera,
+            PipelineConfig {
+                limb_poses: false,
+                ..PipelineConfig::default()
+            },
+        )
+        .with_size_search(false);
+        let (a, b) =
+            crate::pool::on_worker(|| (on.estimate(&depth, None), off.estimate(&depth, None)));
+        let (a, b) = (a.unwrap(), b.unwrap());
+        let (ea, eb) = (
+            mean_joint_error_of(&model, &a, &pose),
+            mean_joint_error_of(&model, &b, &pose),
+        );
+        assert!(ea < 0.05 && ea <= eb, "with limb poses {ea}, without {eb}");
+    }
+
+    #[test]
+    fn limb_poses_are_within_the_joint_limits() {
+        let p = BodyModel::neutral_pose();
+        for (first, arm) in LIMBS {
+            let n = if arm {
+                ARM_POSES.len()
+            } else {
+                LEG_POSES.len()
+            };
+            for k in 0..n {
+                let angles: &[f64] = if arm { &ARM_POSES[k] } else { &LEG_POSES[k] };
+                let q = with_limb(&p, first, angles);
+                assert_eq!(BodyModel::clamp_pose(&q), q, "limb at {first}, pose {k}");
+            }
+        }
+    }
+
+    #[test]
+    fn each_limb_takes_the_best_ranked_pose_and_only_when_it_ranks_lower() {
+        // A rank with its minimum at the right arm overhead and the left leg kicking.
+        let target = with_limb(
+            &with_limb(&BodyModel::neutral_pose(), param::R_SHOULDER, &ARM_POSES[5]),
+            param::L_HIP,
+            &LEG_POSES[4],
+        );
+        let dist = |p: &Pose| -> f64 { p.iter().zip(&target).map(|(a, b)| (a - b).abs()).sum() };
+        let rank = |poses: &[Pose]| Ok(poses.iter().map(dist).collect());
+        let start = BodyModel::neutral_pose();
+        let (pose, r, changed) = best_limbs(&start, dist(&start), rank).unwrap();
+        assert!(changed);
+        assert_eq!(pose, target);
+        assert!(r.abs() < 1e-12);
+        // Nothing ranks below the target itself: it stays as it is.
+        let (same, _, changed) = best_limbs(&target, 0.0, rank).unwrap();
+        assert!(!changed);
+        assert_eq!(same, target);
+    }
+}
