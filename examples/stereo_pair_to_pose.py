@@ -47,7 +47,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.picture:
         gray = (255 * left).astype(np.uint8)
         rgb = dp.viz.overlay_labels(np.dstack([gray, gray, gray]), result.labels)
-        dp.viz.save_png(args.picture, dp.viz.draw_skeleton(rgb, result.joints, camera))
+        picture = dp.viz.draw_skeleton(rgb, result.joints, camera, confidence=result.confidence)
+        dp.viz.save_png(args.picture, picture)
         print(f"picture: {args.picture}")
     return 0
 

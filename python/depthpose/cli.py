@@ -138,7 +138,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
         from . import viz
 
         pic = viz.overlay_labels(viz.colorize_depth(depth), res.labels)
-        return viz.draw_skeleton(pic, res.joints, seq.camera)
+        return viz.draw_skeleton(pic, res.joints, seq.camera, confidence=res.confidence)
 
     return _run_frames(
         args, seq.iter_frames(), seq.n_frames, step, reset, picture, seq.frame_name,
@@ -183,7 +183,8 @@ def _cmd_estimate_stereo(args: argparse.Namespace) -> int:
             gray = gray[..., :3].mean(axis=2)
         top = 255.0 if gray.max(initial=0.0) > 1.0 else 1.0
         rgb = np.repeat((np.clip(gray / top, 0, 1) * 255).astype(np.uint8)[..., None], 3, 2)
-        return viz.draw_skeleton(viz.overlay_labels(rgb, res.labels), res.joints, seq.camera)
+        pic = viz.overlay_labels(rgb, res.labels)
+        return viz.draw_skeleton(pic, res.joints, seq.camera, confidence=res.confidence)
 
     return _run_frames(
         args, seq.iter_pairs(), seq.n_frames, step, reset, picture, seq.frame_name,

@@ -49,7 +49,7 @@ def run(out: Path, frames: int = 30, motion: str = "wave") -> int:
         ious.append((mask & gt_mask).sum() / max((mask | gt_mask).sum(), 1))
         if t % max(frames // 6, 1) == 0 and len(pictures) < 6:
             pic = viz.overlay_labels(viz.colorize_depth(depth), res.labels)
-            pictures.append(viz.draw_skeleton(pic, res.joints, camera))
+            pictures.append(viz.draw_skeleton(pic, res.joints, camera, confidence=res.confidence))
         bar.update(1)
     bar.close()
     acc = evaluate(joints, seq["joints"])

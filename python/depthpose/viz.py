@@ -183,10 +183,17 @@ def _drawable(a: np.ndarray, b: np.ndarray, h: int, w: int) -> bool:
 
 
 def draw_skeleton(
-    rgb: np.ndarray, joints: np.ndarray, camera: _core.Camera, width: int = 2
+    rgb: np.ndarray,
+    joints: np.ndarray,
+    camera: _core.Camera,
+    width: int = 2,
+    *,
+    confidence: np.ndarray | None = None,
 ) -> np.ndarray:
     """Draws the 15-joint skeleton (joints (15, 3), camera frame, metres; NaN joints
-    are left out) projected into the picture, with Pillow's ``ImageDraw``."""
+    are left out) projected into the picture, with Pillow's ``ImageDraw``.
+    ``confidence`` (15,), a result's per-joint confidence: joints of confidence 0 (not
+    seen, such as the legs of an upper-body view) are left out too, with their bones."""
     out = _rgb(rgb).astype(np.uint8)
     if not isinstance(camera, _core.Camera):
         raise InvalidTypeError(f"camera: expected a depthpose.Camera, got {type(camera)}")
@@ -199,6 +206,14 @@ def draw_skeleton(
     joints = j.astype(np.float64)
     if np.isinf(joints).any():
         raise InvalidInputError("joints: holds an infinite value")
+    if confidence is not None:
+        c = _validate.array(
+            np.asarray(confidence) if isinstance(confidence, (list, tuple)) else confidence,
+            "confidence",
+        )
+        if c.shape != (15,) or _validate._not_numbers(c.dtype) is not None:
+            raise InvalidInputError(f"confidence: expected (15,) numbers, got {c.shape} {c.dtype}")
+        joints[~(c.astype(np.float64) > 0)] = np.nan
     if not np.isfinite(joints).any():
         return out
     from PIL import Image, ImageDraw
