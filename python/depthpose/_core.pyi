@@ -70,6 +70,7 @@ __all__ = [
 ]
 
 __version__: str
+"""The package version."""
 
 # ---- errors and limits ----------------------------------------------------------------
 class DepthPoseError(ValueError):
@@ -96,16 +97,17 @@ class ResourceLimitError(DepthPoseError):
     """An input, or the result it asks for, exceeds a size limit; the message names the
     limit. Checked before anything is allocated or copied."""
 
-#: Largest image (height × width) read, written, rendered or passed as a depth image,
-#: mask or picture: 2**23 pixels.
 MAX_IMAGE_PIXELS: int
-#: Most depth readings (within the mask) one body fit, shape calibration, template
-#: match or descriptor takes: 2**20.
+"""Largest image (height × width) read, written, rendered or passed as a depth image,
+mask or picture: 2**23 pixels."""
 MAX_FIT_POINTS: int
-#: Largest number of elements of any other array argument: 2**26.
+"""Most depth readings (within the mask) one body fit, shape calibration, template match
+or descriptor takes: 2**20."""
 MAX_ARRAY_ELEMENTS: int
-#: Largest result one call may allocate (an output array, a graph, meshes): 2**30 bytes.
+"""Largest number of elements of any other array argument: 2**26."""
 MAX_RESULT_BYTES: int
+"""Largest result one call may allocate (an output array, a graph, meshes): 2**30
+bytes."""
 #: Smallest and largest metres-per-unit scale of integer depth files (1e-6 and 1).
 MIN_DEPTH_SCALE: float
 MAX_DEPTH_SCALE: float
@@ -187,19 +189,53 @@ class Camera:
 # ---- cloud --------------------------------------------------------------------------
 def depth_to_points(
     depth: npt.NDArray[np.generic], camera: Camera, mask: npt.NDArray[np.bool_] | None = None
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]: ...
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.int32]]:
+    """The 3-D points of a depth image.
+
+    Parameters
+    ----------
+    depth : ndarray
+        (H, W) float metres or uint16 millimetres; 0 and NaN are no reading.
+    camera : Camera
+        Its intrinsics; its size must be the image's.
+    mask : ndarray of bool, optional
+        (H, W): only these pixels.
+
+    Returns
+    -------
+    points : ndarray
+        (N, 3) float32, camera frame (x right, y down, z forward), metres, of the pixels
+        with a reading (and in ``mask``), row by row.
+    pixels : ndarray
+        (N, 2) int32, their [row, col].
+    """
 def surface_normals(
     depth: npt.NDArray[np.generic],
     camera: Camera,
     mask: npt.NDArray[np.bool_] | None = None,
     radius: int = 2,
-) -> npt.NDArray[np.float32]: ...
+) -> npt.NDArray[np.float32]:
+    """Unit surface normals (N, 3) float32, facing the camera, of the points of
+    :func:`depth_to_points` (same arguments), from the neighbours within ``radius``
+    pixels."""
 def pixel_graph(
     depth: npt.NDArray[np.generic],
     camera: Camera,
     mask: npt.NDArray[np.bool_] | None = None,
     connectivity: int = 4,
-) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+) -> tuple[npt.NDArray[np.int32], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """The neighbourhood graph of the points of :func:`depth_to_points` (same arguments),
+    4- or 8-connected (``connectivity``) between pixels with a reading.
+
+    Returns
+    -------
+    edges : ndarray
+        (E, 2) int32 point indices.
+    distances : ndarray
+        (E,) float32 3-D distances, metres.
+    depth_steps : ndarray
+        (E,) float32 depth differences z_j − z_i, metres.
+    """
 def foreground_mask(
     depth: npt.NDArray[np.generic],
     background: npt.NDArray[np.generic] | None = None,
@@ -245,7 +281,20 @@ def surface_context(
     angular_bins: int = 12,
     seed: int = 0,
     depth_weight: float = 0.0,
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Surface-context descriptors of the (masked) body in ``depth``, as the template
+    search matches them: at ``samples`` pixels drawn with ``seed``, histograms of the
+    other samples over ``radial_bins`` × ``angular_bins`` log-polar bins.
+
+    Returns
+    -------
+    descriptors : ndarray
+        (N, 3·bins) float32, or (N, 4·bins) with ``depth_weight`` > 0.
+    samples : ndarray
+        (N, 2) float32 sample pixels as [u, v].
+    positions : ndarray
+        (N, 2) float32 sample positions normalised to the body's extent.
+    """
 def _default_model_shape() -> npt.NDArray[np.float64]: ...
 
 @final
@@ -364,6 +413,16 @@ class _TemplateDatabase:
 # ---- body ---------------------------------------------------------------------------
 @final
 class BodyModel:
+    """The 16-segment, 22-degree-of-freedom ellipsoid body: its shape, its kinematics
+    (pose → joints, segment frames), rendering and meshes.
+
+    Parameters
+    ----------
+    height : float
+        Standing height in metres; the reference proportions are scaled to it.
+        Default 1.75.
+    """
+
     def __new__(cls, height: float = 1.75) -> BodyModel: ...
     @property
     def param_names(self) -> list[str]: ...
@@ -441,6 +500,11 @@ class BodyModel:
 # ---- fit (src/python/fit.rs) --------------------------------------------------------
 @final
 class FitConfig:
+    """Settings of the hard-EM fit of the body to a depth image (CRF labelling and
+    Levenberg–Marquardt): noise scale ``sigma``, robust ``loss``, Potts and
+    depth-contrast weights, outlier distance, iterations and pixel stride. Keyword
+    arguments, each with a default."""
+
     sigma: float
     loss: str
     loss_scale: float
@@ -500,6 +564,9 @@ class FitConfig:
 
 @final
 class FitResult:
+    """A fitted pose: its 22 parameters, 15 joints, per-pixel part labels, the energy
+    and its trace, the iterations run and why they stopped."""
+
     @property
     def pose(self) -> npt.NDArray[np.float64]: ...
     @property
@@ -525,6 +592,9 @@ class FitResult:
 
 @final
 class ShapeFitResult:
+    """A body shape calibrated over several frames: the body model, its 12 scale
+    factors and the frames' refitted poses."""
+
     @property
     def model(self) -> BodyModel: ...
     @property
