@@ -209,6 +209,7 @@ def depth_to_points(
     pixels : ndarray
         (N, 2) int32, their [row, col].
     """
+
 def surface_normals(
     depth: npt.NDArray[np.generic],
     camera: Camera,
@@ -218,6 +219,7 @@ def surface_normals(
     """Unit surface normals (N, 3) float32, facing the camera, of the points of
     :func:`depth_to_points` (same arguments), from the neighbours within ``radius``
     pixels."""
+
 def pixel_graph(
     depth: npt.NDArray[np.generic],
     camera: Camera,
@@ -236,6 +238,7 @@ def pixel_graph(
     depth_steps : ndarray
         (E,) float32 depth differences z_j − z_i, metres.
     """
+
 def foreground_mask(
     depth: npt.NDArray[np.generic],
     background: npt.NDArray[np.generic] | None = None,
@@ -295,6 +298,7 @@ def surface_context(
     positions : ndarray
         (N, 2) float32 sample positions normalised to the body's extent.
     """
+
 def _default_model_shape() -> npt.NDArray[np.float64]: ...
 
 @final
