@@ -207,6 +207,16 @@ impl PipelineConfig {
         self.segment.validate()
     }
 
+    /// The settings of one short EM (a tracked frame's budget) from a pose already on
+    /// the body, as the limb-pose and size refits run it: no recentred or swapped
+    /// starts (the pose is on the body already), labels of the EM's pixels only.
+    pub(crate) fn short_refit(&self) -> FitConfig {
+        let mut f = self.fit_with(Some(self.track_iterations), self.final_stride, Some(false));
+        f.recentred_start = false;
+        f.swapped_limb_starts = false;
+        f
+    }
+
     /// The fit settings with another iteration limit, stride and full-pixel labelling.
     pub(crate) fn fit_with(
         &self,

@@ -138,11 +138,7 @@ impl Estimator {
         let mut clock = Clock::start();
         let mut frame = self.prepare(depth, mask, None)?;
         clock.lap("foreground");
-        let hypotheses = self.config.hypotheses;
-        let (best, score) = self.search(&mut frame, &[], hypotheses, false, Some(&mut clock))?;
-        let (best, score) = self.repose_limbs(&mut frame, best, score)?;
-        let sized = self.fit_size(&mut frame, best, score, self.size_search())?;
-        clock.lap("fit");
+        let sized = self.fit_from_scratch(&mut frame, &mut clock, self.size_search())?;
         let fitted = Fitted {
             fit: sized.fit,
             discrepancy: sized.score,
@@ -254,7 +250,7 @@ impl Estimator {
     }
 
     /// [`Self::discrepancies`] plus the rest-pose penalty: how poses compete.
-    fn rankings(&self, scores: &[f64], poses: &[Pose]) -> Vec<f64> {
+    pub(super) fn rankings(&self, scores: &[f64], poses: &[Pose]) -> Vec<f64> {
         scores
             .iter()
             .zip(poses)
@@ -321,15 +317,13 @@ impl Estimator {
     /// The best fit from the template hypotheses (and `extra` start poses, always
     /// refined): the best `hypotheses` by their depth discrepancy refined briefly by EM,
     /// the `finals` explaining the depth best refined fully (their EM continued), the
-    /// best of all kept. Returns the fit and its discrepancy. With `label` the kept
-    /// fit is labelled at every pixel; else it has its EM's labels only
-    /// ([`Self::label_all`] completes it).
+    /// best of all kept. Returns the fit and its discrepancy. The fit has its EM's
+    /// labels only ([`Self::label_all`] completes it).
     pub(crate) fn search(
         &self,
         frame: &mut Frame,
         extra: &[Pose],
         hypotheses: usize,
-        label: bool,
         clock: Option<&mut Clock>,
     ) -> Result<(FitResult, f64)> {
         let cfg = &self.config;
@@ -374,9 +368,6 @@ impl Estimator {
         if brief || final_ranking[k] <= best_rank {
             best_score = final_scores[k];
             best = finals.into_iter().nth(k).expect("k indexes the finals");
-        }
-        if label {
-            best = self.label_all(frame, best, &self.model)?;
         }
         Ok((best, best_score))
     }
@@ -444,7 +435,17 @@ impl Estimator {
     /// The discrepancy of one pose, from one rendering, and the rendering's part labels
     /// (for [`Self::result`]).
     pub(crate) fn discrepancy(&self, frame: &Frame, pose: &Pose) -> (f64, Vec<i16>) {
-        let (rendered, labels) = self.model.render_depth(pose, &self.resolution.working);
+        self.discrepancy_with(frame, &self.model, pose)
+    }
+
+    /// [`Self::discrepancy`] of `pose` on the body `model`.
+    pub(super) fn discrepancy_with(
+        &self,
+        frame: &Frame,
+        model: &BodyModel,
+        pose: &Pose,
+    ) -> (f64, Vec<i16>) {
+        let (rendered, labels) = model.render_depth(pose, &self.resolution.working);
         let score = depth_discrepancy(&rendered, &frame.depth, &frame.mask, DISCREPANCY_CAP);
         (score, labels)
     }

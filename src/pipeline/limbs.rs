@@ -105,21 +105,13 @@ impl Estimator {
         }
         let current = score + self.penalty(&fit.pose);
         let (start, _, changed) = best_limbs(&fit.pose, current, |poses| {
-            let scores = self.discrepancies(frame, poses)?;
-            Ok(scores
-                .iter()
-                .zip(poses)
-                .map(|(s, p)| s + self.penalty(p))
-                .collect())
+            Ok(self.rankings(&self.discrepancies(frame, poses)?, poses))
         })?;
         if !changed {
             return Ok((fit, score));
         }
-        let cfg = self.config();
-        // A tracked frame's budget: the rest of the body is fitted already.
-        let mut config = cfg.fit_with(Some(cfg.track_iterations), cfg.final_stride, Some(false));
-        config.recentred_start = false;
-        config.swapped_limb_starts = false;
+        // The rest of the body is fitted already: a short refit.
+        let config = self.config().short_refit();
         let refit = self
             .fits(frame, &config, &[start], None, None)?
             .pop()

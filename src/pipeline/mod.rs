@@ -16,6 +16,7 @@ pub mod limbs;
 pub mod orientation;
 pub mod resolution;
 pub mod result;
+pub mod scratch;
 pub mod size;
 pub mod stereo;
 pub mod tracker;
@@ -24,7 +25,7 @@ pub use config::PipelineConfig;
 pub use estimator::Estimator;
 pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs, turn_around};
 pub use result::{PoseResult, SegmentSummary, Source, Timings};
-pub use size::{relative_sizes, SizedFit};
+pub use size::{size_steps, SizedFit};
 pub use stereo::{StereoDepth, StereoDepthConfig, StereoPipeline, StereoPose, StereoRig};
 pub use tracker::Tracker;
 

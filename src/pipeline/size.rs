@@ -10,12 +10,10 @@
 //! pipeline. A smaller body leaves observed pixels unexplained, a larger one covers
 //! pixels off the person, so the discrepancy has its minimum near the subject's size.
 
-use super::estimator::{Estimator, Frame, DISCREPANCY_CAP};
-use crate::body::Pose;
-use crate::body::{BodyModel, NUM_SHAPE_FACTORS};
+use super::estimator::{Estimator, Frame};
+use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
 use crate::error::Result;
 use crate::fit::{FitConfig, FitResult};
-use crate::render::depth_discrepancy;
 use rayon::prelude::*;
 
 /// A fit and the body it was made with.
@@ -30,20 +28,13 @@ pub struct SizedFit {
     pub model: BodyModel,
 }
 
-/// The relative sizes tried besides 1: 1 ± k·`step` for k = 1, 2, … while within
-/// `range` (a little tolerance for rounding), nearest first.
-pub fn relative_sizes(range: f64, step: f64) -> Vec<f64> {
-    let mut out = Vec::new();
+/// How many steps of `step` the sizes 1 ± k·`step` may take on each side of 1 within
+/// `range` (a little tolerance for rounding); 0 when either is not positive.
+pub fn size_steps(range: f64, step: f64) -> usize {
     if !(range > 0.0 && step > 0.0) {
-        return out;
+        return 0;
     }
-    let n = ((range + 1e-9) / step).floor() as usize;
-    for k in 1..=n {
-        let d = k as f64 * step;
-        out.push(1.0 - d);
-        out.push(1.0 + d);
-    }
-    out
+    ((range + 1e-9) / step).floor() as usize
 }
 
 impl Estimator {
@@ -65,7 +56,7 @@ impl Estimator {
     ) -> Result<SizedFit> {
         let cfg = self.config();
         let steps = if search {
-            relative_sizes(cfg.size_range, cfg.size_step).len() / 2
+            size_steps(cfg.size_range, cfg.size_step)
         } else {
             0
         };
@@ -77,12 +68,8 @@ impl Estimator {
         };
         if steps > 0 {
             let mut rank = best.score + self.penalty(&best.fit.pose);
-            // One short EM (a tracked frame's) from the fitted pose per size: it is on
-            // the body already, so the recentred start of a fresh fit would repeat it.
-            let mut config =
-                cfg.fit_with(Some(cfg.track_iterations), cfg.final_stride, Some(false));
-            config.recentred_start = false;
-            config.swapped_limb_starts = false;
+            // One short EM from the fitted pose per size: it is on the body already.
+            let config = cfg.short_refit();
             let start = best.fit.pose;
             let step = cfg.size_step;
             let mut round = vec![1.0 - step, 1.0 + step];
@@ -124,7 +111,6 @@ impl Estimator {
         start: &Pose,
         scales: &[f64],
     ) -> Result<Vec<SizedFit>> {
-        let camera = self.resolution().working;
         let models = scales
             .iter()
             .map(|&s| self.model().with_shape_factors(&[s; NUM_SHAPE_FACTORS]))
@@ -136,14 +122,13 @@ impl Estimator {
                 .map(|m| problem.fit_from(m, start, None, None))
                 .collect::<Result<Vec<_>>>()?
         };
-        let (depth, mask) = (&frame.depth, &frame.mask);
+        let frame = &*frame;
         Ok(fits
             .into_par_iter()
             .zip(models)
             .zip(scales)
             .map(|((fit, model), &scale)| {
-                let rendered = model.render_depth(&fit.pose, &camera).0;
-                let score = depth_discrepancy(&rendered, depth, mask, DISCREPANCY_CAP);
+                let score = self.discrepancy_with(frame, &model, &fit.pose).0;
                 SizedFit {
                     fit,
                     score,
@@ -210,15 +195,11 @@ mod tests {
     }
 
     #[test]
-    fn sizes_are_symmetric_nearest_first_and_within_the_range() {
-        assert_eq!(relative_sizes(0.0, 0.05), Vec::<f64>::new());
-        assert_eq!(relative_sizes(0.1, 0.0), Vec::<f64>::new());
-        let s = relative_sizes(0.15, 0.05);
-        assert_eq!(s.len(), 6);
-        for (k, pair) in s.chunks(2).enumerate() {
-            let d = 0.05 * (k + 1) as f64;
-            assert!((pair[0] - (1.0 - d)).abs() < 1e-12 && (pair[1] - (1.0 + d)).abs() < 1e-12);
-        }
-        assert_eq!(relative_sizes(0.12, 0.05).len(), 4);
+    fn size_steps_stay_within_the_range() {
+        assert_eq!(size_steps(0.0, 0.05), 0);
+        assert_eq!(size_steps(0.1, 0.0), 0);
+        // 0.15 / 0.05 is 2.999… in floating point: the tolerance counts it as 3.
+        assert_eq!(size_steps(0.15, 0.05), 3);
+        assert_eq!(size_steps(0.12, 0.05), 2);
     }
 }

@@ -170,12 +170,8 @@ impl Tracker {
                 let est = &self.estimator;
                 let mut frame = est.prepare(depth, mask, None)?;
                 clock.lap("foreground");
-                let n = est.config().hypotheses;
-                let (best, score) = est.search(&mut frame, &[], n, false, Some(&mut clock))?;
-                let (best, score) = est.repose_limbs(&mut frame, best, score)?;
                 let search_size = self.size.is_none() && est.size_search();
-                let sized = est.fit_size(&mut frame, best, score, search_size)?;
-                clock.lap("fit");
+                let sized = est.fit_from_scratch(&mut frame, &mut clock, search_size)?;
                 let fitted = Fitted {
                     fit: sized.fit,
                     discrepancy: sized.score,
@@ -266,7 +262,7 @@ impl Tracker {
             limbs_swapped(&pose, true, false),
             limbs_swapped(&pose, false, true),
         ];
-        let (best, best_score) = est.search(&mut frame, &own, n, false, None)?;
+        let (best, best_score) = est.search(&mut frame, &own, n, None)?;
         let margin = if lost { 0.0 } else { cfg.switch_margin };
         let rank_best = best_score + est.penalty(&best.pose);
         let rank_track = score + est.penalty(&pose);
