@@ -19,11 +19,12 @@
 use super::estimator::{Estimator, Fitted, Frame};
 use super::hypotheses::swap_limbs;
 use super::result::{Clock, PoseResult, Source};
-use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
+use crate::body::{param, root_rotation, BodyModel, Pose, NUM_SHAPE_FACTORS};
 use crate::error::{Error, Result};
 use crate::fit::start::limbs_swapped;
 use crate::fit::{fit_shape, PosePrior, ShapeConfig, ShapeFrame, ShapeResult};
 use crate::segment::SegmentHint;
+use nalgebra::Rotation3;
 use std::collections::VecDeque;
 use std::time::Instant;
 
@@ -294,12 +295,10 @@ impl Tracker {
     /// The previous pose moved on by the damped velocity, within the joint limits.
     fn predict(&self) -> Pose {
         let prev = self.track.previous.expect("a track");
-        let Some(before) = self.track.before else {
-            return prev;
-        };
-        let damping = self.estimator.config().velocity_damping;
-        let pred: Pose = std::array::from_fn(|i| prev[i] + damping * (prev[i] - before[i]));
-        BodyModel::clamp_pose(&pred)
+        match self.track.before {
+            Some(before) => extrapolate(&before, &prev, self.estimator.config().velocity_damping),
+            None => prev,
+        }
     }
 
     /// At least `min_inlier_share` of the person's pixels labelled as body (`labels`
@@ -389,6 +388,20 @@ impl Tracker {
     }
 }
 
+/// The pose after `prev` at the damped constant velocity from `before` to `prev`,
+/// within the joint limits. Translation and joint angles move on linearly; the root
+/// rotation moves on along the rotation from `before` to `prev` (on SO(3), not in the
+/// rotation-vector components, which jump where a turning body's rotation angle
+/// passes π).
+fn extrapolate(before: &Pose, prev: &Pose, damping: f64) -> Pose {
+    let mut pred: Pose = std::array::from_fn(|i| prev[i] + damping * (prev[i] - before[i]));
+    let r_prev = root_rotation(prev);
+    let step = (r_prev * root_rotation(before).inverse()).scaled_axis() * damping;
+    let r_pred = Rotation3::from_scaled_axis(step) * r_prev;
+    pred[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(r_pred.scaled_axis().as_slice());
+    BodyModel::clamp_pose(&pred)
+}
+
 /// An error as "Kind: message", the kind named as Python names it.
 fn error_text(e: &Error) -> String {
     let kind = match e {
@@ -449,6 +462,43 @@ mod tests {
 
     fn param_root_yaw() -> usize {
         crate::body::param::ROOT_R + 1
+    }
+
+    /// A pose turned about the vertical by `yaw`, with its rotation vector written as
+    /// given (any of the equivalent vectors).
+    fn yawed(yaw: f64) -> Pose {
+        let mut p = BodyModel::neutral_pose();
+        p[param_root_yaw()] = yaw;
+        p[param::L_ELBOW] = 0.4;
+        p
+    }
+
+    #[test]
+    fn the_prediction_turns_on_through_a_half_turn() {
+        use std::f64::consts::PI;
+        // A body turning by 0.1 rad a frame through a half turn, its rotation vector
+        // jumping from (0, π − 0.05, 0) to the equivalent (0, −π + 0.05, 0).
+        let before = yawed(PI - 0.05);
+        let prev = yawed(PI + 0.05 - 2.0 * PI);
+        let pred = extrapolate(&before, &prev, 0.5);
+        let expected = Rotation3::from_scaled_axis(nalgebra::Vector3::y() * (PI + 0.10));
+        let angle = (root_rotation(&pred).inverse() * expected).angle();
+        assert!(angle < 1e-12, "predicted rotation off by {angle} rad");
+        // The joint angles and translation move on linearly.
+        let mut moved = prev;
+        moved[param::ROOT_T] += 0.1;
+        moved[param::L_ELBOW] += 0.2;
+        let pred = extrapolate(&prev, &moved, 0.5);
+        assert!((pred[param::ROOT_T] - moved[param::ROOT_T] - 0.05).abs() < 1e-12);
+        assert!((pred[param::L_ELBOW] - 0.7).abs() < 1e-12);
+        assert!((root_rotation(&pred).inverse() * root_rotation(&prev)).angle() < 1e-12);
+    }
+
+    #[test]
+    fn the_prediction_is_the_linear_one_away_from_a_half_turn() {
+        let pred = extrapolate(&yawed(0.2), &yawed(0.3), 0.5);
+        assert!((pred[param_root_yaw()] - 0.35).abs() < 1e-12);
+        assert_eq!(pred[param::ROOT_R], 0.0);
     }
 
     #[test]
