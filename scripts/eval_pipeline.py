@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """End-to-end accuracy and speed of ``depthpose.pipeline.estimate_frames`` on the shared
-synthetic sequences (issue #8).
+synthetic sequences.
 
 For every sequence (``../shared/data/synth/*.npz`` by default): tracked over every frame,
 and from scratch over every ``--step``-th frame, each with the sequence's background
@@ -54,8 +54,23 @@ def _load(path: Path, frames: int | None, start: int):
     return seq, depth, gt
 
 
+def _upsampled(depth, camera, background, u: int):
+    """Each pixel repeated u×u times, the intrinsics scaled to match (a sensor of u times
+    the resolution seeing the same scene)."""
+    import depthpose as dp
+
+    if u == 1:
+        return depth, camera, background
+    depth = depth.repeat(u, axis=1).repeat(u, axis=2)
+    background = None if background is None else background.repeat(u, axis=0).repeat(u, axis=1)
+    c = camera
+    camera = dp.Camera(u * c.fx, u * c.fy, u * (c.cx + 0.5) - 0.5, u * (c.cy + 0.5) - 0.5,
+                       u * c.width, u * c.height)  # fmt: skip
+    return depth, camera, background
+
+
 def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None,
-         background=True):  # fmt: skip
+         background=True, upsample=1):  # fmt: skip
     from depthpose.pipeline import estimate_frames
 
     sources: list[str] = []
@@ -69,11 +84,13 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
             sources.append("tracking+search" if kept else res.source)
 
     idx = np.arange(0, depth.shape[0], 1 if track else step)
+    bg = seq.background if background else None
+    frames, camera, bg = _upsampled(depth[idx], seq.camera, bg, upsample)
     t0 = time.perf_counter()
     r = estimate_frames(
-        depth[idx],
-        seq.camera,
-        background=seq.background if background else None,
+        frames,
+        camera,
+        background=bg,
         track=track,
         templates=templates,
         config=config,
@@ -105,7 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA, help="folder of sequence .npz")
     ap.add_argument("--seq", nargs="*", default=None, help="substrings of sequence names")
     ap.add_argument("--mode", choices=["both", "track", "scratch"], default="both")
-    ap.add_argument("--step", type=int, default=4, help="from scratch: every STEP-th frame")
+    ap.add_argument("--step", type=int, default=2, help="from scratch: every STEP-th frame")
     ap.add_argument("--frames", type=int, default=None, help="first N frames of each")
     ap.add_argument("--start", type=int, default=0, help="first frame of each sequence")
     ap.add_argument("--config", default=None, help="PipelineConfig fields as JSON")
@@ -137,9 +154,18 @@ def main(argv: list[str] | None = None) -> int:
         help="use the sequence's frame of the empty scene (--no-background: segment "
         "the person automatically)",
     )
+    ap.add_argument(
+        "--upsample",
+        type=int,
+        default=1,
+        help="repeat each pixel N×N times and scale the intrinsics to match (2: the "
+        "sequences at 640×480)",
+    )
     args = ap.parse_args(argv)
     if args.step < 1:
         ap.error("--step must be >= 1")
+    if args.upsample < 1:
+        ap.error("--upsample must be >= 1")
 
     import depthpose as dp
     from depthpose.metrics import evaluate
@@ -172,7 +198,7 @@ def main(argv: list[str] | None = None) -> int:
         for k, v in config.as_dict().items()
     }
     summary: dict = {"sequences": {}, "config": settings, "height": args.height,
-                     "calibrate": args.calibrate}  # fmt: skip
+                     "calibrate": args.calibrate, "upsample": args.upsample}  # fmt: skip
     for f in files:
         seq, depth, gt = _load(f, args.frames, args.start)
         row = [f.stem, str(depth.shape[0])]
@@ -180,7 +206,8 @@ def main(argv: list[str] | None = None) -> int:
         for m in modes:
             idx, r, t, wall = _run(depth, seq, templates, config, track=m == "track",
                                    step=args.step, model=model, calibrate=calibrate,
-                                   background=args.background)  # fmt: skip
+                                   background=args.background,
+                                   upsample=args.upsample)  # fmt: skip
             acc = evaluate(r.joints, gt[idx])
             preds[m].append(r.joints)
             gts[m].append(gt[idx])

@@ -1,4 +1,4 @@
-"""Subject shape calibration in ``PoseTracker`` (issue #8): the tracker refines the body
+"""Subject shape calibration in ``PoseTracker``: the tracker refines the body
 shape over its first frames and keeps it, unless told the shape."""
 
 from __future__ import annotations

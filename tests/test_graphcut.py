@@ -247,8 +247,8 @@ def test_graph_bad_input():
 
 
 def test_integer_sums_that_could_pass_int64_are_refused():
-    # They used to wrap: three terminal edges of 2**62 each gave a flow of -2**62, and
-    # four unary costs of 2**62 an energy of 0.
+    # Unchecked, such sums wrap: three terminal edges of 2**62 each would give a flow of
+    # -2**62, and four unary costs of 2**62 an energy of 0.
     big = 2**62
     g = gc.Graph(3, dtype=np.int64)
     g.add_terminal_edges(np.array([0, 1]), np.full(2, big // 2), np.zeros(2, np.int64))

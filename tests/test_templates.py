@@ -1,4 +1,4 @@
-"""Template database and surface-context descriptors (issue 6)."""
+"""Template database and surface-context descriptors."""
 
 from __future__ import annotations
 
