@@ -203,7 +203,6 @@ impl Tracker {
         };
         self.frames += 1;
         self.track.hint = frame.segmentation.as_ref().map(|s| s.hint());
-        self.learn_background(&frame)?;
         if switched {
             self.switches += usize::from(!first);
             self.track.before = None;
@@ -219,6 +218,7 @@ impl Tracker {
             self.track.recent.push_back(res.discrepancy);
         }
         let mut res = res;
+        self.learn_background(&frame, &mut res)?;
         if self.calibrating() && !first && self.explains_enough(&frame, &frame.labels) {
             self.collect(frame, &mut res);
         }
@@ -392,18 +392,23 @@ impl Tracker {
     }
 
     /// Learns the background from a frame whose fit explains the person (outside its
-    /// mask) and hands what is reliably known to the next frame's segmentation.
-    fn learn_background(&mut self, frame: &Frame) -> Result<()> {
+    /// mask) and hands what is reliably known to the next frame's segmentation; the
+    /// time it takes is the result's `background` stage.
+    fn learn_background(&mut self, frame: &Frame, res: &mut PoseResult) -> Result<()> {
         let explained = self.explains_enough(frame, &frame.labels);
         let Some(model) = self.background.as_mut() else {
             return Ok(());
         };
+        let start = Instant::now();
         if explained {
             model.update(&frame.depth, Some(&frame.mask))?;
         }
         if let Some(hint) = self.track.hint.as_mut() {
             hint.background = model.learned();
         }
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        res.timings.stages.push(("background", ms));
+        res.timings.total += ms;
         Ok(())
     }
 

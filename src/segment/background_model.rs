@@ -61,6 +61,16 @@ pub const MAX_MARGIN: usize = 64;
 /// A mode's mean follows its readings with at most this many frames of memory (a slow
 /// drift of the sensor is followed).
 const MEAN_WINDOW: u16 = 32;
+/// `1/n` for the running mean of `n` readings, `n` in 1..=[`MEAN_WINDOW`].
+const WEIGHTS: [f32; MEAN_WINDOW as usize + 1] = {
+    let mut w = [0.0; MEAN_WINDOW as usize + 1];
+    let mut n = 1;
+    while n <= MEAN_WINDOW as usize {
+        w[n] = 1.0 / n as f32;
+        n += 1;
+    }
+    w
+};
 
 impl BackgroundModelConfig {
     /// Checks every field; the error names the first nonsensical one (prefixed
@@ -118,7 +128,7 @@ impl Mode {
     #[inline]
     fn add(&mut self, z: f32) {
         self.count = self.count.saturating_add(1);
-        self.depth += (z - self.depth) / self.count.min(MEAN_WINDOW) as f32;
+        self.depth += (z - self.depth) * WEIGHTS[self.count.min(MEAN_WINDOW) as usize];
     }
 }
 
@@ -128,8 +138,8 @@ pub struct BackgroundModel {
     width: usize,
     height: usize,
     config: BackgroundModelConfig,
-    mode: Vec<Mode>,
-    challenger: Vec<Mode>,
+    /// Per pixel: its mode and the challenging mode.
+    modes: Vec<[Mode; 2]>,
     /// Learned depth per pixel, 0 where unknown; shared with the segmentations that use
     /// it (copied on write only while one still holds it).
     background: Arc<Vec<f32>>,
@@ -151,8 +161,7 @@ impl BackgroundModel {
             width,
             height,
             config,
-            mode: vec![Mode::default(); n],
-            challenger: vec![Mode::default(); n],
+            modes: vec![[Mode::default(); 2]; n],
             background: Arc::new(vec![0.0; n]),
             seen: vec![false; n],
             seen_pixels: 0,
@@ -225,53 +234,17 @@ impl BackgroundModel {
             None => grown.fill(false),
         }
         let config = self.config;
-        let needed = config.frames.min(u16::MAX as usize) as u16;
         let background = Arc::make_mut(&mut self.background);
-        for i in 0..n {
-            let z = depth[i];
-            // Without a reading (0, negative or NaN) nothing is learned.
-            if !(z > 0.0 && z.is_finite()) {
-                continue;
-            }
-            if !self.seen[i] {
-                self.seen[i] = true;
-                self.seen_pixels += 1;
-            }
-            if grown[i] {
-                continue;
-            }
-            let (mode, challenger) = (&mut self.mode[i], &mut self.challenger[i]);
-            if mode.count == 0 {
-                *mode = Mode { depth: z, count: 1 };
-            } else if mode.agrees(z, &config) {
-                mode.add(z);
-                challenger.count = challenger.count.saturating_sub(1);
-            } else if challenger.agrees(z, &config) {
-                challenger.add(z);
-            } else if challenger.count == 0 || z > challenger.depth {
-                // A farther reading takes the challenger's place at once.
-                *challenger = Mode { depth: z, count: 1 };
-            } else {
-                challenger.count -= 1;
-            }
-            // A stable challenger wins when it is farther (the mode was something in
-            // front of it that has gone) or when the mode never became stable.
-            if challenger.count >= needed && (challenger.depth > mode.depth || mode.count < needed)
-            {
-                *mode = *challenger;
-                *challenger = Mode::default();
-            }
-            if mode.count >= needed {
-                let b = &mut background[i];
-                if *b == 0.0 {
-                    self.learned_pixels += 1;
-                    *b = mode.depth;
-                } else if mode.depth >= *b - config.tolerance_at(*b) {
-                    // Only a farther stable depth, or the same one refined, replaces it.
-                    *b = mode.depth;
-                }
-            }
-        }
+        let (seen_new, learned_new) = learn_pixels(
+            depth,
+            &grown,
+            &mut self.seen,
+            &mut self.modes,
+            background,
+            &config,
+        );
+        self.seen_pixels += seen_new;
+        self.learned_pixels += learned_new;
         self.grown = grown;
         self.frames += 1;
         Ok(())
@@ -284,47 +257,91 @@ impl BackgroundModel {
     }
 }
 
-/// `mask` grown by `margin` pixels in every direction (a square structuring element:
-/// the row pass, then the column pass), into `out`.
-fn grow(mask: &[bool], width: usize, height: usize, margin: usize, out: &mut [bool]) {
-    if margin == 0 {
-        out.copy_from_slice(mask);
-        return;
+/// Learns from one frame's readings (`person`: the pixels not to learn); returns how
+/// many pixels had their first reading and how many were learned for the first time.
+fn learn_pixels(
+    depth: &[f32],
+    person: &[bool],
+    seen: &mut [bool],
+    modes: &mut [[Mode; 2]],
+    background: &mut [f32],
+    config: &BackgroundModelConfig,
+) -> (usize, usize) {
+    let needed = config.frames.min(u16::MAX as usize) as u16;
+    let mut seen_new = 0;
+    let mut learned_new = 0;
+    let pixels = depth
+        .iter()
+        .zip(person)
+        .zip(seen.iter_mut())
+        .zip(modes.iter_mut().zip(background.iter_mut()));
+    for (((&z, &person), seen), ([mode, challenger], b)) in pixels {
+        // Without a reading (0, negative or NaN) nothing is learned.
+        if !(z > 0.0 && z.is_finite()) {
+            continue;
+        }
+        seen_new += usize::from(!*seen);
+        *seen = true;
+        if person {
+            continue;
+        }
+        if mode.count == 0 {
+            *mode = Mode { depth: z, count: 1 };
+        } else if mode.agrees(z, config) {
+            mode.add(z);
+            challenger.count = challenger.count.saturating_sub(1);
+        } else if challenger.agrees(z, config) {
+            challenger.add(z);
+        } else if challenger.count == 0 || z > challenger.depth {
+            // A farther reading takes the challenger's place at once.
+            *challenger = Mode { depth: z, count: 1 };
+        } else {
+            challenger.count -= 1;
+        }
+        // A stable challenger wins when it is farther (the mode was something in
+        // front of it that has gone) or when the mode never became stable.
+        if challenger.count >= needed && (challenger.depth > mode.depth || mode.count < needed) {
+            *mode = *challenger;
+            *challenger = Mode::default();
+        }
+        if mode.count >= needed {
+            if *b == 0.0 {
+                learned_new += 1;
+                *b = mode.depth;
+            } else if mode.depth >= *b - config.tolerance_at(*b) {
+                // Only a farther stable depth, or the same one refined, replaces it.
+                *b = mode.depth;
+            }
+        }
     }
-    let mut rows = vec![false; mask.len()];
+    (seen_new, learned_new)
+}
+
+/// `mask` grown by `margin` pixels in every direction (a square structuring element),
+/// into `out`: each row holding mask pixels is grown along itself by ORs of shifted
+/// copies, then ORed into the rows within the margin (rows without any are skipped).
+fn grow(mask: &[bool], width: usize, height: usize, margin: usize, out: &mut [bool]) {
+    out.fill(false);
+    let mut row = vec![false; width];
+    let m = margin.min(width.saturating_sub(1));
     for r in 0..height {
         let src = &mask[r * width..][..width];
-        let dst = &mut rows[r * width..][..width];
-        // Distance to the last mask pixel on the left, then on the right.
-        let mut last = usize::MAX;
-        for c in 0..width {
-            if src[c] {
-                last = c;
-            }
-            dst[c] = last != usize::MAX && c - last <= margin;
+        if !src.contains(&true) {
+            continue;
         }
-        last = usize::MAX;
-        for c in (0..width).rev() {
-            if src[c] {
-                last = c;
+        row.copy_from_slice(src);
+        for d in 1..=m {
+            for (t, &v) in row[..width - d].iter_mut().zip(&src[d..]) {
+                *t |= v;
             }
-            dst[c] |= last != usize::MAX && last - c <= margin;
+            for (t, &v) in row[d..].iter_mut().zip(&src[..width - d]) {
+                *t |= v;
+            }
         }
-    }
-    for c in 0..width {
-        let mut last = usize::MAX;
-        for r in 0..height {
-            if rows[r * width + c] {
-                last = r;
+        for rr in r.saturating_sub(margin)..(r + margin + 1).min(height) {
+            for (t, &v) in out[rr * width..][..width].iter_mut().zip(&row) {
+                *t |= v;
             }
-            out[r * width + c] = last != usize::MAX && r - last <= margin;
-        }
-        last = usize::MAX;
-        for r in (0..height).rev() {
-            if rows[r * width + c] {
-                last = r;
-            }
-            out[r * width + c] |= last != usize::MAX && last - r <= margin;
         }
     }
 }
@@ -628,5 +645,34 @@ mod tests {
         }
         grow(&mask, w, h, 0, &mut out);
         assert_eq!(out, mask);
+    }
+
+    #[test]
+    fn growing_matches_a_brute_force_dilation() {
+        // Masks of scattered pixels, at the borders too, and margins beyond the size.
+        let (w, h) = (13, 9);
+        for seed in 0..40u64 {
+            let mask: Vec<bool> = (0..w * h)
+                .map(|i| noise(seed as usize, i) > 0.008)
+                .collect();
+            for margin in [0, 1, 2, 5, 20] {
+                let mut out = vec![false; w * h];
+                grow(&mask, w, h, margin, &mut out);
+                for r in 0..h {
+                    for c in 0..w {
+                        let want = (0..w * h).any(|j| {
+                            mask[j]
+                                && (j / w).abs_diff(r) <= margin
+                                && (j % w).abs_diff(c) <= margin
+                        });
+                        assert_eq!(
+                            out[r * w + c],
+                            want,
+                            "seed {seed} margin {margin} ({r}, {c})"
+                        );
+                    }
+                }
+            }
+        }
     }
 }
