@@ -19,8 +19,9 @@ template search, and re-initialised / switched frames separately) and the peak r
 
 The person's mask of each frame is scored against the sequence's ground-truth ``mask``
 (intersection over union, a failed frame counting 0), over every frame and from frame
-``--iou-from`` on (after a learned background's warm-up), with the median time of the
-segmentation stage (``timings["foreground"]``). ``--learn-background`` sets
+``--iou-from`` on (after a learned background's warm-up), with the median times of the
+segmentation stage (``timings["foreground"]``) and of learning the background
+(``timings["background"]``). ``--learn-background`` sets
 ``PipelineConfig.learn_background`` (used by the tracker without a background frame).
 
 Shape calibration (``PoseTracker``, tracked mode): ``--calibrate auto`` (the tracker's
@@ -77,12 +78,15 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
     # Mask IoU per frame (a failed frame keeps 0) and the segmentation stage's times.
     ious = np.zeros(len(idx))
     seg_ms: list[float] = []
+    learn_ms: list[float] = []
 
     def on_frame(k, res):
         if masks is not None:
             ious[k] = _iou(np.asarray(res.mask, bool), masks[idx[k]])
         if "foreground" in res.timings:
             seg_ms.append(res.timings["foreground"])
+        if "background" in res.timings:
+            learn_ms.append(res.timings["background"])
         # "tracking+search": a tracked frame whose re-check / lost-track search kept it.
         kept = res.source == "tracking" and "search" in res.timings
         if "calibration" in res.timings:
@@ -107,7 +111,7 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
     times: dict[str, list[float]] = {}
     for src, sec in zip(sources, r.seconds, strict=True):
         times.setdefault(src, []).append(1000 * sec)
-    return idx, r, times, wall, (ious if masks is not None else None), seg_ms
+    return idx, r, times, wall, (ious if masks is not None else None), seg_ms, learn_ms
 
 
 def _fmt_row(cells, widths):
@@ -195,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
     gts: dict[str, list[np.ndarray]] = {m: [] for m in modes}
     times: dict[str, list[float]] = {
         "update": [], "kept": [], "reinit": [], "estimate": [], "calibration": [],
-        "segment_track": [], "segment_scratch": [],
+        "segment_track": [], "segment_scratch": [], "learn": [],
     }  # fmt: skip
     model = None if args.height is None else dp.BodyModel(height=args.height)
     calibrate = {"auto": None, "on": True, "off": False}[args.calibrate]
@@ -211,11 +215,12 @@ def main(argv: list[str] | None = None) -> int:
         row = [f.stem, str(depth.shape[0])]
         summary["sequences"][f.stem] = {}
         for m in modes:
-            idx, r, t, wall, ious, seg_ms = _run(
+            idx, r, t, wall, ious, seg_ms, learn_ms = _run(
                 depth, seq, templates, config, track=m == "track", step=args.step,
                 model=model, calibrate=calibrate, background=args.background, masks=masks,
             )  # fmt: skip
             times[f"segment_{m}"] += seg_ms
+            times["learn"] += learn_ms
             acc = evaluate(r.joints, gt[idx])
             preds[m].append(r.joints)
             gts[m].append(gt[idx])
@@ -338,6 +343,7 @@ def main(argv: list[str] | None = None) -> int:
         ("estimate", "PoseEstimator.estimate (from scratch)"),
         ("segment_track", "segmentation (timings['foreground']), tracked"),
         ("segment_scratch", "segmentation (timings['foreground']), from scratch"),
+        ("learn", "learning the background (timings['background'])"),
     ]:
         v = times[k]
         if v:

@@ -212,11 +212,8 @@ pub fn segment_person(
             .zip(&on_plane)
             .zip(depth.data.iter().zip(bg))
             .map(|((&u, &p), (&z, &b))| {
-                u & if b > 0.0 {
-                    in_front_of_background(z, b, fg)
-                } else {
-                    !p
-                }
+                let known = b > 0.0;
+                u & ((known & in_front_of_background(z, b, fg)) | (!known & !p))
             })
             .collect(),
         None => usable
