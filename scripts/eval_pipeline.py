@@ -15,6 +15,14 @@ template search, and re-initialised / switched frames separately) and the peak r
     python scripts/eval_pipeline.py --mode track --seq walk_left --frames 20
     python scripts/eval_pipeline.py --json-out figures.json
     python scripts/eval_pipeline.py --mode track --height 1.60 --calibrate on
+    python scripts/eval_pipeline.py --mode track --no-background --learn-background
+
+The person's mask of each frame is scored against the sequence's ground-truth ``mask``
+(intersection over union, a failed frame counting 0), over every frame and from frame
+``--iou-from`` on (after a learned background's warm-up), with the median times of the
+segmentation stage (``timings["foreground"]``) and of learning the background
+(``timings["background"]``). ``--learn-background`` sets
+``PipelineConfig.learn_background`` (used by the tracker without a background frame).
 
 Shape calibration (``PoseTracker``, tracked mode): ``--calibrate auto`` (the tracker's
 default: on unless a model is given), ``on`` or ``off``; ``--height H`` starts from
@@ -51,7 +59,14 @@ def _load(path: Path, frames: int | None, start: int):
     stop = seq.n_frames if frames is None else min(seq.n_frames, start + frames)
     depth = seq.frames(start, stop)
     gt = np.asarray(seq.gt_joints[start:stop], np.float64)
-    return seq, depth, gt
+    with np.load(path) as d:
+        masks = np.asarray(d["mask"][start:stop], bool) if "mask" in d.files else None
+    return seq, depth, gt, masks
+
+
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    union = np.count_nonzero(a | b)
+    return float(np.count_nonzero(a & b) / union) if union else 1.0
 
 
 def _upsampled(depth, camera, background, u: int):
@@ -70,12 +85,24 @@ def _upsampled(depth, camera, background, u: int):
 
 
 def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None,
-         background=True, upsample=1):  # fmt: skip
+         background=True, masks=None, upsample=1):  # fmt: skip
     from depthpose.pipeline import estimate_frames
 
     sources: list[str] = []
+    idx = np.arange(0, depth.shape[0], 1 if track else step)
+    # Mask IoU per frame (a failed frame keeps 0) and the segmentation stage's times.
+    ious = np.zeros(len(idx))
+    seg_ms: list[float] = []
+    learn_ms: list[float] = []
 
-    def on_frame(_k, res):
+    def on_frame(k, res):
+        if masks is not None:
+            gt_mask = masks[idx[k]].repeat(upsample, axis=0).repeat(upsample, axis=1)
+            ious[k] = _iou(np.asarray(res.mask, bool), gt_mask)
+        if "foreground" in res.timings:
+            seg_ms.append(res.timings["foreground"])
+        if "background" in res.timings:
+            learn_ms.append(res.timings["background"])
         # "tracking+search": a tracked frame whose re-check / lost-track search kept it.
         kept = res.source == "tracking" and "search" in res.timings
         if "calibration" in res.timings:
@@ -83,7 +110,6 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
         else:
             sources.append("tracking+search" if kept else res.source)
 
-    idx = np.arange(0, depth.shape[0], 1 if track else step)
     bg = seq.background if background else None
     frames, camera, bg = _upsampled(depth[idx], seq.camera, bg, upsample)
     t0 = time.perf_counter()
@@ -103,7 +129,7 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
     times: dict[str, list[float]] = {}
     for src, sec in zip(sources, r.seconds, strict=True):
         times.setdefault(src, []).append(1000 * sec)
-    return idx, r, times, wall
+    return idx, r, times, wall, (ious if masks is not None else None), seg_ms, learn_ms
 
 
 def _fmt_row(cells, widths):
@@ -161,6 +187,15 @@ def main(argv: list[str] | None = None) -> int:
         help="repeat each pixel N×N times and scale the intrinsics to match (2: the "
         "sequences at 640×480)",
     )
+    ap.add_argument(
+        "--learn-background",
+        action="store_true",
+        help="PipelineConfig(learn_background=True): the tracker learns the scene's "
+        "background over the frames (without a background frame)",
+    )
+    ap.add_argument(
+        "--iou-from", type=int, default=10, help="mask IoU also from this frame on (default 10)"
+    )
     args = ap.parse_args(argv)
     if args.step < 1:
         ap.error("--step must be >= 1")
@@ -178,6 +213,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"no sequences under {args.data}", file=sys.stderr)
         return 2
     config = PipelineConfig(**json.loads(args.config)) if args.config else PipelineConfig()
+    if args.learn_background:
+        config = config.replace(learn_background=True)
     if args.depth_weight:
         templates = dp.TemplateDatabase.build(depth_weight=args.depth_weight, progress=False)
     else:
@@ -188,7 +225,8 @@ def main(argv: list[str] | None = None) -> int:
     preds: dict[str, list[np.ndarray]] = {m: [] for m in modes}
     gts: dict[str, list[np.ndarray]] = {m: [] for m in modes}
     times: dict[str, list[float]] = {
-        "update": [], "kept": [], "reinit": [], "estimate": [], "calibration": []
+        "update": [], "kept": [], "reinit": [], "estimate": [], "calibration": [],
+        "segment_track": [], "segment_scratch": [], "learn": [],
     }  # fmt: skip
     model = None if args.height is None else dp.BodyModel(height=args.height)
     calibrate = {"auto": None, "on": True, "off": False}[args.calibrate]
@@ -200,14 +238,17 @@ def main(argv: list[str] | None = None) -> int:
     summary: dict = {"sequences": {}, "config": settings, "height": args.height,
                      "calibrate": args.calibrate, "upsample": args.upsample}  # fmt: skip
     for f in files:
-        seq, depth, gt = _load(f, args.frames, args.start)
+        seq, depth, gt, masks = _load(f, args.frames, args.start)
         row = [f.stem, str(depth.shape[0])]
         summary["sequences"][f.stem] = {}
         for m in modes:
-            idx, r, t, wall = _run(depth, seq, templates, config, track=m == "track",
-                                   step=args.step, model=model, calibrate=calibrate,
-                                   background=args.background,
-                                   upsample=args.upsample)  # fmt: skip
+            idx, r, t, wall, ious, seg_ms, learn_ms = _run(
+                depth, seq, templates, config, track=m == "track", step=args.step,
+                model=model, calibrate=calibrate, background=args.background, masks=masks,
+                upsample=args.upsample,
+            )  # fmt: skip
+            times[f"segment_{m}"] += seg_ms
+            times["learn"] += learn_ms
             acc = evaluate(r.joints, gt[idx])
             preds[m].append(r.joints)
             gts[m].append(gt[idx])
@@ -221,6 +262,15 @@ def main(argv: list[str] | None = None) -> int:
             row += [f"{acc['mpjpe_mm']:.1f}", f"{acc['pck']:.3f}"]
             summary["sequences"][f.stem][m] = {**acc, "wall_s": wall,
                                                "reinit": len(t.get("templates", []))}  # fmt: skip
+            if ious is not None:
+                late = ious[idx >= args.iou_from]
+                summary["sequences"][f.stem][m].update(
+                    mask_iou=float(ious.mean()),
+                    mask_iou_late=float(late.mean()) if late.size else float("nan"),
+                )
+                row += [f"{ious.mean():.3f}"]
+            else:
+                row += ["-"]
             if m == "track":
                 sf = r.shape_factors
                 summary["sequences"][f.stem][m].update(
@@ -238,7 +288,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"{f.stem} {m}: " + " ".join(f"{e:.0f}" for e in err), flush=True)
         rows.append(row)
         print(_table(["sequence", "frames"] + [f"{m} {k}" for m in modes for k in
-                                                ("MPJPE", "PCK")], [row]).splitlines()[-1],
+                                                ("MPJPE", "PCK", "IoU")], [row]).splitlines()[-1],
               flush=True)  # fmt: skip
 
     # Mean over sequences and the worst sequence (by PCK), per mode.
@@ -254,13 +304,25 @@ def main(argv: list[str] | None = None) -> int:
         summary[f"{m}_worst_sequence"] = {"name": worst, **per[worst][m]}
         mean_row += [f"{np.mean(mp):.1f}", f"{np.mean(pk):.3f}"]
         worst_row += [f"{per[worst][m]['mpjpe_mm']:.1f}", f"{per[worst][m]['pck']:.3f} ({worst})"]
+        if all("mask_iou" in per[name][m] for name in per):
+            for key in ("mask_iou", "mask_iou_late"):
+                v = [per[name][m][key] for name in per]
+                worst_iou = min(per, key=lambda name, m=m, key=key: per[name][m][key])
+                summary[f"{m}_mean_over_sequences"][key] = float(np.mean(v))
+                summary[f"{m}_worst_{key}"] = {"name": worst_iou, key: per[worst_iou][m][key]}
+            iou_w = summary[f"{m}_worst_mask_iou"]
+            mean_row += [f"{summary[f'{m}_mean_over_sequences']['mask_iou']:.3f}"]
+            worst_row += [f"{iou_w['mask_iou']:.3f} ({iou_w['name']})"]
+        else:
+            mean_row += ["-"]
+            worst_row += ["-"]
     overall = ["all frames", str(sum(int(r[1]) for r in rows))]
     per_joint = {}
     for m in modes:
         p, g = np.concatenate(preds[m]), np.concatenate(gts[m])
         acc = evaluate(p, g)
         summary[m] = acc
-        overall += [f"**{acc['mpjpe_mm']:.1f}**", f"**{acc['pck']:.3f}**"]
+        overall += [f"**{acc['mpjpe_mm']:.1f}**", f"**{acc['pck']:.3f}**", ""]
         valid = np.isfinite(p).all(-1)
         err = np.linalg.norm(np.where(valid[..., None], p, 0.0) - g, axis=-1)
         per_joint[m] = [
@@ -270,7 +332,9 @@ def main(argv: list[str] | None = None) -> int:
             )
             for j in range(len(JOINT_NAMES))
         ]
-    header = ["sequence", "frames"] + [f"{m} {k}" for m in modes for k in ("MPJPE mm", "PCK")]
+    header = ["sequence", "frames"] + [
+        f"{m} {k}" for m in modes for k in ("MPJPE mm", "PCK", "mask IoU")
+    ]
     print()
     print(_table(header, [*rows, overall, mean_row, worst_row]))
     for m in modes:
@@ -279,6 +343,12 @@ def main(argv: list[str] | None = None) -> int:
         off = float(np.mean(~(torso <= 0.15)))
         summary[f"{m}_torso_off_15cm"] = off
         print(f"{m}: torso joint more than 15 cm off in {100 * off:.1f} % of frames")
+        means = summary[f"{m}_mean_over_sequences"]
+        if "mask_iou_late" in means:
+            w = summary[f"{m}_worst_mask_iou_late"]
+            print(f"{m}: mask IoU from frame {args.iou_from} on: mean over sequences "
+                  f"{means['mask_iou_late']:.3f}, worst {w['mask_iou_late']:.3f} "
+                  f"({w['name']})")  # fmt: skip
     if args.per_joint:
         print()
         jrows = [
@@ -299,6 +369,9 @@ def main(argv: list[str] | None = None) -> int:
         ("reinit", "PoseTracker.update, (re-)initialised frame"),
         ("calibration", "PoseTracker.update, frame that ran the shape calibration"),
         ("estimate", "PoseEstimator.estimate (from scratch)"),
+        ("segment_track", "segmentation (timings['foreground']), tracked"),
+        ("segment_scratch", "segmentation (timings['foreground']), from scratch"),
+        ("learn", "learning the background (timings['background'])"),
     ]:
         v = times[k]
         if v:

@@ -144,6 +144,75 @@ def test_shared_synthetic_sequence_tracked(templates):
     assert acc["pck"] >= 0.8, acc
 
 
+def _iou(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.count_nonzero(a & b) / max(np.count_nonzero(a | b), 1))
+
+
+def test_a_learned_background_segments_a_shared_sequence_at_least_as_well(templates):
+    # Tracked without the background frame, with and without learning the background:
+    # after the warm-up the learned background is in use and its masks match the
+    # ground truth at least as well, and the joints are as accurate.
+    path = shared("synth", "dm_walk_front.npz")
+    from depthpose.sequence import open_sequence
+
+    seq = open_sequence(path)
+    with np.load(path) as d:
+        truth = np.asarray(d["mask"], bool)
+    frames = seq.frames()
+    warmup = 10
+
+    def run(learn: bool):
+        config = dp.PipelineConfig(learn_background=learn)
+        tracker = PoseTracker(seq.camera, templates=templates, config=config)
+        ious, methods, joints = [], [], []
+        for k in range(frames.shape[0]):
+            res = tracker.update(frames[k])
+            ious.append(_iou(res.mask, truth[k]))
+            methods.append(res.segmentation_method)
+            joints.append(res.joints)
+        return np.array(ious), methods, np.array(joints)
+
+    plain_iou, plain_methods, plain_joints = run(False)
+    learned_iou, learned_methods, learned_joints = run(True)
+    assert set(plain_methods) == {"planes"}
+    assert learned_methods[0] == "planes"
+    assert set(learned_methods[warmup:]) == {"learned"}, learned_methods
+    assert learned_iou[warmup:].mean() >= plain_iou[warmup:].mean(), (
+        learned_iou[warmup:].mean(),
+        plain_iou[warmup:].mean(),
+    )
+    assert learned_iou[warmup:].min() > 0.9
+    pck = [evaluate(j, seq.gt_joints)["pck"] for j in (plain_joints, learned_joints)]
+    assert abs(pck[1] - pck[0]) <= 0.02, pck
+
+
+def test_learn_background_is_a_setting_and_ignored_with_a_background_frame(wave, templates):
+    config = dp.PipelineConfig(learn_background=True)
+    assert config.learn_background is True
+    assert dp.PipelineConfig().learn_background is False
+    assert config.as_dict()["learn_background"] is True
+    assert config.replace(learn_background=False) == dp.PipelineConfig()
+    with pytest.raises(dp.InvalidInputError, match="learn_background"):
+        dp.PipelineConfig(learn_background="yes")
+    seq, cam, bg = wave
+    depth = seq["depth"].astype(np.float32) / 1000
+    tracker = PoseTracker(cam, templates=templates, config=config, background=bg)
+    assert {tracker.update(d).segmentation_method for d in depth} == {"background"}
+
+
+def test_cli_learns_the_background_only_when_tracking(tmp_path, wave, templates, capsys):
+    from depthpose.cli import main
+
+    seq, _, _ = wave
+    path = tmp_path / "seq.npz"
+    synth.save(path, {k: v for k, v in seq.items() if k != "background"})
+    out = tmp_path / "pred.npz"
+    rc = main(["estimate", str(path), "--out", str(out), "--learn-background"])
+    assert rc == 0 and np.isfinite(np.load(out)["joints"]).all()
+    rc = main(["estimate", str(path), "--out", str(out), "--learn-background", "--no-track"])
+    assert rc == 2 and "--learn-background: needs --track" in capsys.readouterr().err
+
+
 def test_real_kinect_frames_look_like_a_person(templates):
     files = sorted(shared("real_depth", "skeltrack").glob("*.u16"))
     cam = dp.Camera.kinect_v1()

@@ -901,6 +901,16 @@ class PipelineConfig:
     calibration_frames, calibration_every, calibration_prior_weight, calibration_rounds
         Tracking: shape calibration over this many usable frames (0 = never), every
         this many, with this prior weight and rounds. Default 8, 1, 1e5 and 3.
+    learn_background
+        Tracking without a ``background`` frame: learn the scene's static background
+        over the frames — per pixel, the farthest depth that stays stable for 8 frames
+        outside the person's mask (pixels without readings, and those the person has
+        never left, stay unknown) — and, once half of the pixels are known, segment the
+        person as what lies clearly in front of it, the automatic support-plane test
+        deciding the pixels not yet learned (``result.segmentation_method`` is then
+        ``"learned"``). A person standing still is not learned: their pixels are
+        excluded, and a learned depth only gives way to a farther stable one. Ignored by
+        ``PoseEstimator`` and when a background frame is given. Default False.
     working_focal
         Focal length (pixels) of the working resolution large images are reduced to.
         Default 300.

@@ -114,11 +114,15 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     """Poses of every frame of a sequence, a folder of frames or one image, frame by
     frame: a frame that cannot be read or estimated is reported (which, why) and
     recorded as NaN; the others are estimated and written."""
-    from .pipeline import PoseEstimator, PoseTracker
+    from .pipeline import PipelineConfig, PoseEstimator, PoseTracker
     from .sequence import open_sequence
 
     if args.camera is not None and args.intrinsics is not None:
         raise InvalidInputError("--camera: give either --camera or --intrinsics, not both")
+    if args.learn_background and not args.track:
+        raise InvalidInputError(
+            "--learn-background: needs --track (the background is learned over the frames)"
+        )
     seq = open_sequence(
         args.input,
         intrinsics=args.intrinsics,
@@ -129,7 +133,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_writable(out)
     if args.track:
-        tracker = PoseTracker(seq.camera, background=seq.background)
+        config = PipelineConfig(learn_background=True) if args.learn_background else None
+        tracker = PoseTracker(seq.camera, background=seq.background, config=config)
         step, reset = tracker.update, tracker.reset
     else:
         step, reset = PoseEstimator(seq.camera, background=seq.background).estimate, None
@@ -357,6 +362,12 @@ def build_parser() -> argparse.ArgumentParser:
         action=argparse.BooleanOptionalAction,
         default=True,
         help="track through the sequence (default) or estimate each frame",
+    )
+    est.add_argument(
+        "--learn-background",
+        action="store_true",
+        help="tracking without a background frame: learn the scene's static background "
+        "over the frames and segment the person in front of it once it is known",
     )
     _camera_args(est)
     est.add_argument(

@@ -183,6 +183,12 @@ class PoseTracker:
     depth much worse than lately, the track is lost and the template search runs (the
     tracked pose among its starts); every ``config.recheck_every`` frames the search
     runs anyway and the track switches when it finds a clearly better pose.
+
+    With ``config.learn_background`` and no ``background``, the tracker learns the
+    scene's static background over the frames, outside the person's mask, and segments
+    the person in front of it once enough is known (``result.segmentation_method ==
+    "learned"``; the learning's time is ``timings["background"]``). What it learned is
+    kept across :meth:`reset` (the same camera and scene).
     """
 
     def __init__(

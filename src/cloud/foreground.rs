@@ -108,9 +108,8 @@ pub fn foreground_mask(
     let mut candidate = vec![false; n];
     match background {
         Some(bg) => {
-            let (t0, t2) = (config.bg_tolerance, config.bg_tolerance_quadratic);
             for ((c, &z), &b) in candidate.iter_mut().zip(depth.data).zip(bg.data) {
-                *c = in_range(z) & (b.is_nan() | (b <= 0.0) | (z < b - (t0 + t2 * b * b)));
+                *c = in_range(z) & (b.is_nan() | (b <= 0.0) | in_front_of_background(z, b, config));
             }
         }
         None => {
@@ -150,6 +149,13 @@ pub fn foreground_mask(
         fill_dropouts(depth, &mut mask, bbox, &mut added);
     }
     Ok(mask)
+}
+
+/// Whether depth `z` lies clearly in front of the background depth `b` (a reading):
+/// `z < b − tol(b)` with tol(b) = `bg_tolerance` + `bg_tolerance_quadratic`·b².
+#[inline]
+pub(crate) fn in_front_of_background(z: f32, b: f32, config: &ForegroundConfig) -> bool {
+    z < b - (config.bg_tolerance + config.bg_tolerance_quadratic * b * b)
 }
 
 /// Passes of [`fill_dropouts`]: enough for the 1–2 pixel dropouts of depth sensors.

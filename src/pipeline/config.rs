@@ -2,7 +2,7 @@
 
 use crate::error::{ensure, Result};
 use crate::fit::FitConfig;
-use crate::segment::SegmentConfig;
+use crate::segment::{BackgroundModelConfig, SegmentConfig};
 
 /// Settings of [`super::Estimator`] and [`super::Tracker`].
 #[derive(Debug, Clone, PartialEq)]
@@ -84,6 +84,13 @@ pub struct PipelineConfig {
     pub calibration_rounds: usize,
     /// Person segmentation.
     pub segment: SegmentConfig,
+    /// Tracking without a background frame: learn the scene's static background over
+    /// the frames ([`crate::segment::BackgroundModel`]) and, once enough of it is known,
+    /// segment the person as what lies in front of it, the support-plane test deciding
+    /// the pixels not yet learned.
+    pub learn_background: bool,
+    /// ... with these settings.
+    pub background_model: BackgroundModelConfig,
     /// The working focal length (pixels): larger images are reduced by the whole factor
     /// nearest `focal / working_focal`, so that every sensor is processed at about the
     /// resolution the pipeline is built for (a 320×240 Kinect-like image). Results
@@ -124,6 +131,8 @@ impl Default for PipelineConfig {
             calibration_prior_weight: 1e5,
             calibration_rounds: 3,
             segment: SegmentConfig::default(),
+            learn_background: false,
+            background_model: BackgroundModelConfig::default(),
             working_focal: 300.0,
         }
     }
@@ -204,6 +213,7 @@ impl PipelineConfig {
         real(self.size_step, 0.01, 0.5, false, "size_step")?;
         real(self.working_focal, 1.0, 1e6, false, "working_focal")?;
         self.fit.validate()?;
+        self.background_model.validate()?;
         self.segment.validate()
     }
 

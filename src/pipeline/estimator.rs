@@ -119,6 +119,11 @@ impl Estimator {
         &self.config
     }
 
+    /// Whether it was given a frame of the empty scene.
+    pub fn has_background(&self) -> bool {
+        self.background.is_some()
+    }
+
     /// The input camera.
     pub fn camera(&self) -> &Camera {
         &self.resolution.input

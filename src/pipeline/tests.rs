@@ -207,3 +207,62 @@ fn a_bad_config_is_refused_naming_the_field() {
     .unwrap_err();
     assert!(err.to_string().starts_with("finals:"), "{err}");
 }
+
+#[test]
+fn the_tracker_learns_the_room_behind_a_walk_across_it() {
+    let camera = Camera::itop();
+    let model = BodyModel::default();
+    let empty = room(&camera);
+    let config = PipelineConfig {
+        calibration_frames: 0,
+        learn_background: true,
+        background_model: crate::segment::BackgroundModelConfig {
+            frames: 4,
+            ..Default::default()
+        },
+        ..PipelineConfig::default()
+    };
+    let mut tracker = Tracker::new(estimator(&camera, config.clone()), false);
+    let mut methods = Vec::new();
+    for k in 0..14 {
+        // Walking in place while moving right across the room.
+        let mut pose = walking(&model, 0.3 * k as f64);
+        pose[0] = -0.7 + 0.1 * k as f64;
+        let depth = room_posed(&model, &pose);
+        let r = crate::pool::on_worker(|| tracker.update(&depth, None)).unwrap();
+        let err = mean_joint_error(&r, &pose);
+        assert!(err < 0.06, "frame {k}: mean joint error {err}");
+        let seg = r.segmentation.as_ref().unwrap();
+        methods.push(seg.method);
+        let (body, _) = model.render_depth(&pose, &camera);
+        let truth: Vec<bool> = body.iter().map(|&b| b > 0.0).collect();
+        let inter = r.mask.iter().zip(&truth).filter(|(&a, &b)| a && b).count();
+        let union = r.mask.iter().zip(&truth).filter(|(&a, &b)| a || b).count();
+        let iou = inter as f64 / union as f64;
+        assert!(iou > 0.9, "frame {k}: mask IoU {iou}");
+    }
+    use crate::segment::Method;
+    assert_eq!(methods[0], Method::Planes);
+    assert!(
+        methods[8..].iter().all(|&m| m == Method::Learned),
+        "{methods:?}"
+    );
+    let m = tracker.background_model().unwrap();
+    assert!(m.learned_share() > 0.8, "{}", m.learned_share());
+    for (&b, &z) in m.background().iter().zip(&empty) {
+        assert!(
+            b == 0.0 || (b - z).abs() < 0.01,
+            "learned {b} where the room is {z}"
+        );
+    }
+    // With a frame of the empty scene nothing is learned.
+    let est = Estimator::new(
+        &camera,
+        BodyModel::default(),
+        default_templates(),
+        config,
+        Some(&empty),
+    )
+    .unwrap();
+    assert!(Tracker::new(est, false).background_model().is_none());
+}

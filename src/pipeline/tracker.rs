@@ -15,6 +15,11 @@
 //! body shape to them all together ([`crate::fit::fit_shape`]), starting from the sized
 //! body; it tracks with that shape from then on. A calibration that fails leaves the
 //! shape as it was and is not retried.
+//!
+//! **Learned background.** With `learn_background` and no background frame, every frame
+//! whose fit explains the person teaches a [`BackgroundModel`] the scene's static depth
+//! outside the person's mask; once it is reliable, the next frames' segmentation uses it
+//! ([`crate::segment::Method::Learned`]). It survives `reset` (the same scene).
 
 use super::estimator::{Estimator, Fitted, Frame};
 use super::hypotheses::swap_limbs;
@@ -23,7 +28,7 @@ use crate::body::{param, root_rotation, BodyModel, Pose, NUM_SHAPE_FACTORS};
 use crate::error::{Error, Result};
 use crate::fit::start::limbs_swapped;
 use crate::fit::{fit_shape, PosePrior, ShapeConfig, ShapeFrame, ShapeResult};
-use crate::segment::SegmentHint;
+use crate::segment::{BackgroundModel, SegmentHint};
 use nalgebra::Rotation3;
 use std::collections::VecDeque;
 use std::time::Instant;
@@ -72,6 +77,8 @@ pub struct Tracker {
     pub lost_frames: usize,
     /// Frames where the track switched to a search's result.
     pub switches: usize,
+    /// The learned background, when it learns one.
+    background: Option<BackgroundModel>,
 }
 
 impl Tracker {
@@ -79,6 +86,12 @@ impl Tracker {
     /// over the first frames (when `config.calibration_frames > 0`).
     pub fn new(estimator: Estimator, calibrate: bool) -> Self {
         let base_model = estimator.model().clone();
+        let cfg = estimator.config();
+        let working = &estimator.resolution().working;
+        let background = (cfg.learn_background && !estimator.has_background()).then(|| {
+            BackgroundModel::new(working.width, working.height, cfg.background_model)
+                .expect("validated with the estimator's config")
+        });
         Tracker {
             estimator,
             base_model,
@@ -89,6 +102,7 @@ impl Tracker {
             frames: 0,
             lost_frames: 0,
             switches: 0,
+            background,
         }
     }
 
@@ -205,6 +219,7 @@ impl Tracker {
             self.track.recent.push_back(res.discrepancy);
         }
         let mut res = res;
+        self.learn_background(&frame, &mut res)?;
         if self.calibrating() && !first && self.explains_enough(&frame, &frame.labels) {
             self.collect(frame, &mut res);
         }
@@ -370,6 +385,32 @@ impl Tracker {
 }
 
 impl Tracker {
+    /// The learned background (working resolution), when the tracker learns one.
+    pub fn background_model(&self) -> Option<&BackgroundModel> {
+        self.background.as_ref()
+    }
+
+    /// Learns the background from a frame whose fit explains the person (outside its
+    /// mask) and hands what is reliably known to the next frame's segmentation; the
+    /// time it takes is the result's `background` stage.
+    fn learn_background(&mut self, frame: &Frame, res: &mut PoseResult) -> Result<()> {
+        let explained = self.explains_enough(frame, &frame.labels);
+        let Some(model) = self.background.as_mut() else {
+            return Ok(());
+        };
+        let start = Instant::now();
+        if explained {
+            model.update(&frame.depth, Some(&frame.mask))?;
+        }
+        if let Some(hint) = self.track.hint.as_mut() {
+            hint.background = model.learned();
+        }
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        res.timings.stages.push(("background", ms));
+        res.timings.total += ms;
+        Ok(())
+    }
+
     /// Takes the calibration's outcome: a fitted shape is tracked with from now on (from
     /// this frame's pose under it; the velocity and the discrepancy history belong to
     /// the old shape); a failure is recorded and the model kept. Either way the

@@ -110,6 +110,7 @@ impl PyPipelineConfig {
                         c.calibration_prior_weight = real_field(&value, n)?
                     }
                     "calibration_rounds" => c.calibration_rounds = int_field(&value, n)?,
+                    "learn_background" => c.learn_background = bool_field(&value, n)?,
                     "working_focal" => c.working_focal = real_field(&value, n)?,
                     "fit" => c.fit = fit_config_of(&value)?,
                     other => {
@@ -169,6 +170,7 @@ impl PyPipelineConfig {
         d.set_item("calibration_every", c.calibration_every)?;
         d.set_item("calibration_prior_weight", c.calibration_prior_weight)?;
         d.set_item("calibration_rounds", c.calibration_rounds)?;
+        d.set_item("learn_background", c.learn_background)?;
         d.set_item("working_focal", c.working_focal)?;
         d.set_item("fit", PyFitConfig::from_rust(&c.fit))?;
         Ok(d)
@@ -300,7 +302,8 @@ impl PyPoseResult {
     fn discrepancy(&self) -> f64 {
         self.inner.discrepancy
     }
-    /// How the person was found: "background", "planes", or None for a given mask.
+    /// How the person was found: "background", "planes", "learned" (a tracker's learned
+    /// background), or None for a given mask.
     #[getter]
     fn segmentation_method(&self) -> Option<&'static str> {
         self.inner.segmentation.as_ref().map(|s| s.method.name())

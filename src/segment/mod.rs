@@ -6,9 +6,13 @@
 //! support planes (floor, walls) are found and removed ([`planes`]), what remains is
 //! split into depth-continuous clusters, and the person is the cluster that looks most
 //! like one in metric terms ([`clusters`]); in a video the previous frame's planes are
-//! reused and the previous person is followed. The result says which method found the
-//! person, which planes were removed and which other person-like clusters were seen.
+//! reused and the previous person is followed. A video may also learn its static
+//! background over its frames ([`background_model`]); once it has, the person is what
+//! lies clearly in front of the learned background, with the support-plane test kept for
+//! the pixels not yet learned. The result says which method found the person, which
+//! planes were removed and which other person-like clusters were seen.
 
+pub mod background_model;
 pub mod clusters;
 pub mod planes;
 
@@ -16,13 +20,17 @@ pub mod planes;
 mod tests;
 
 use crate::camera::Camera;
-use crate::cloud::foreground::{fill_dropouts, Components, DROPOUT_FILL_PASSES};
+use crate::cloud::foreground::{
+    fill_dropouts, in_front_of_background, Components, DROPOUT_FILL_PASSES,
+};
 use crate::cloud::{foreground_mask, DepthView, ForegroundConfig};
 use crate::error::{ensure, Error, Result};
+pub use background_model::{BackgroundModel, BackgroundModelConfig};
 pub use clusters::{Cluster, PersonPrior};
 use nalgebra::Vector3;
 use planes::Rays;
 pub use planes::{Plane, PlaneConfig};
+use std::sync::Arc;
 
 /// Settings of [`segment_person`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -85,6 +93,9 @@ pub enum Method {
     Background,
     /// Support planes removed, the most person-like cluster kept.
     Planes,
+    /// As [`Method::Planes`], but where a video's learned background is known the
+    /// pixels in front of it are the candidates instead of those off the planes.
+    Learned,
 }
 
 impl Method {
@@ -92,6 +103,7 @@ impl Method {
         match self {
             Method::Background => "background",
             Method::Planes => "planes",
+            Method::Learned => "learned",
         }
     }
 }
@@ -103,6 +115,9 @@ pub struct SegmentHint {
     pub planes: Vec<Plane>,
     /// The person's centroid last (camera frame, m).
     pub centroid: Option<[f32; 3]>,
+    /// The video's learned background (metres, row-major, the depth image's size; 0
+    /// where unknown), once it is reliable ([`BackgroundModel::learned`]).
+    pub background: Option<Arc<Vec<f32>>>,
 }
 
 /// The person's pixels and how they were found.
@@ -125,14 +140,16 @@ impl Segmentation {
         SegmentHint {
             planes: self.planes.clone(),
             centroid: Some(self.person.centroid),
+            background: None,
         }
     }
 }
 
 /// The person's pixels in `depth`: by background subtraction when `background` is given,
 /// else by support-plane removal and cluster choice (module docs). `hint` carries a
-/// video's previous frame. Errors with `NoBody` (saying what was found) when nothing
-/// looks like a person, and `InvalidArgument` when the background's size differs.
+/// video's previous frame and its learned background, which decides the pixels it knows.
+/// Errors with `NoBody` (saying what was found) when nothing looks like a person, and
+/// `InvalidArgument` when the background's (or the learned one's) size differs.
 pub fn segment_person(
     depth: &DepthView,
     camera: &Camera,
@@ -151,6 +168,12 @@ pub fn segment_person(
             )
         },
     )?;
+    let learned = hint.and_then(|h| h.background.as_deref());
+    if let Some(b) = learned {
+        ensure(b.len() == depth.data.len(), "hint.background", || {
+            format!("has {} values for {} pixels", b.len(), depth.data.len())
+        })?;
+    }
     let rays = Rays::new(camera, depth.width, depth.height);
     if let Some(bg) = background {
         let mask = foreground_mask(depth, Some(bg), &config.foreground)?;
@@ -182,11 +205,23 @@ pub fn segment_person(
     }
     let previous = hint.map(|h| h.planes.as_slice()).unwrap_or(&[]);
     let (planes, on_plane) = planes::detect_planes(depth, &rays, &usable, &config.planes, previous);
-    let candidate: Vec<bool> = usable
-        .iter()
-        .zip(&on_plane)
-        .map(|(&u, &p)| u & !p)
-        .collect();
+    let candidate: Vec<bool> = match learned {
+        // Known pixels: in front of the learned background; unknown ones: off the planes.
+        Some(bg) => usable
+            .iter()
+            .zip(&on_plane)
+            .zip(depth.data.iter().zip(bg))
+            .map(|((&u, &p), (&z, &b))| {
+                let known = b > 0.0;
+                u & ((known & in_front_of_background(z, b, fg)) | (!known & !p))
+            })
+            .collect(),
+        None => usable
+            .iter()
+            .zip(&on_plane)
+            .map(|(&u, &p)| u & !p)
+            .collect(),
+    };
     // Medians are taken per group below, not per component.
     let components = Components::label(depth, &candidate, fg.max_step, usize::MAX);
     let up = clusters::up_direction(&planes);
@@ -240,7 +275,11 @@ pub fn segment_person(
     others.sort_by(|a, b| b.score.total_cmp(&a.score));
     Ok(Segmentation {
         mask,
-        method: Method::Planes,
+        method: if learned.is_some() {
+            Method::Learned
+        } else {
+            Method::Planes
+        },
         planes,
         person,
         others,

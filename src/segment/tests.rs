@@ -4,6 +4,7 @@
 use super::*;
 use crate::body::BodyModel;
 use crate::cloud::foreground::Components;
+use std::sync::Arc;
 
 /// A room seen by the ITOP-like camera: the floor at `floor` metres below the camera
 /// (y down), a back wall at `wall` metres, optionally a side wall at x = `side`.
@@ -197,6 +198,7 @@ fn two_people_the_nearer_is_chosen_then_the_tracked_one_is_kept() {
     let hint = SegmentHint {
         planes: seg.planes.clone(),
         centroid: Some(seg.others[0].centroid),
+        background: None,
     };
     let followed = segment(&scene, &room.camera, Some(&hint)).unwrap();
     assert!(iou(&followed.mask, &truth_far) > 0.9);
@@ -325,4 +327,68 @@ fn the_majority_fill_closes_bites_but_not_a_shadow_band() {
     for r in 0..h {
         assert!(!mask[r * w + 2], "shadow pixel ({r}, 2) left out");
     }
+}
+
+/// The hint of a video whose learned background is `learned`.
+fn learned_hint(learned: Vec<f32>) -> SegmentHint {
+    SegmentHint {
+        background: Some(Arc::new(learned)),
+        ..SegmentHint::default()
+    }
+}
+
+#[test]
+fn a_learned_background_decides_the_pixels_it_knows_and_planes_the_rest() {
+    let mut room = Room::new();
+    room.side = Some(-2.0);
+    let model = BodyModel::new(1.75).unwrap();
+    let mut empty = room.depth();
+    // Clutter: a box on the floor and a tall cabinet, both part of the learned scene.
+    paste_box(&mut empty, &room.camera, (0.7, 1.2), (0.5, 1.0), 2.8);
+    paste_box(&mut empty, &room.camera, (-1.4, -1.0), (-0.2, 1.0), 3.6);
+    let mut scene = empty.clone();
+    let pose = standing(&model, room.floor, 0.0, 3.0);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    // The person has stood still with its left half all along: unknown around there.
+    let w = room.camera.width;
+    let person: Vec<usize> = (0..truth.len()).filter(|&i| truth[i]).collect();
+    let rows = person.iter().map(|&i| i / w);
+    let (top, bottom) = (rows.clone().min().unwrap(), rows.max().unwrap());
+    let cols = person.iter().map(|&i| i % w);
+    let (left, right) = (cols.clone().min().unwrap(), cols.max().unwrap());
+    let mut learned = empty.clone();
+    for (i, b) in learned.iter_mut().enumerate() {
+        let (r, c) = (i / w, i % w);
+        if r + 4 >= top && r <= bottom + 4 && c + 4 >= left && c <= (left + right) / 2 {
+            *b = 0.0;
+        }
+    }
+    assert!(learned.iter().zip(&truth).any(|(&b, &t)| t && b == 0.0));
+    assert!(learned.iter().zip(&truth).any(|(&b, &t)| t && b > 0.0));
+    let seg = segment(&scene, &room.camera, Some(&learned_hint(learned.clone()))).unwrap();
+    assert_eq!(seg.method, Method::Learned);
+    assert_eq!(seg.method.name(), "learned");
+    let score = iou(&seg.mask, &truth);
+    assert!(score > 0.95, "IoU {score}");
+    assert!(seg.others.is_empty(), "{:?}", seg.others);
+    // A learned background of another size is refused, naming it.
+    let err = segment(&scene, &room.camera, Some(&learned_hint(vec![3.0; 7]))).unwrap_err();
+    assert!(err.to_string().contains("hint.background"), "{err}");
+}
+
+#[test]
+fn a_person_touching_the_wall_is_cut_closer_with_a_learned_background() {
+    let mut room = Room::new();
+    room.wall = 3.25;
+    let model = BodyModel::new(1.75).unwrap();
+    let empty = room.depth();
+    let mut scene = empty.clone();
+    let pose = standing(&model, room.floor, 0.0, 3.1);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    let truth = paste(&mut scene, &body);
+    let planes = iou(&segment(&scene, &room.camera, None).unwrap().mask, &truth);
+    let seg = segment(&scene, &room.camera, Some(&learned_hint(empty))).unwrap();
+    let learned = iou(&seg.mask, &truth);
+    assert!(learned >= planes && learned > 0.85, "{learned} vs {planes}");
 }
