@@ -132,10 +132,15 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     )
     out = Path(args.out)
     _check_writable(out)
+    status: Callable[[], str] | None = None
     if args.track:
         config = PipelineConfig(learn_background=True) if args.learn_background else None
         tracker = PoseTracker(seq.camera, background=seq.background, config=config)
         step, reset = tracker.update, tracker.reset
+
+        def status() -> str:
+            return "calibrating the body shape" if tracker.calibrating else ""
+
     else:
         step, reset = PoseEstimator(seq.camera, background=seq.background).estimate, None
 
@@ -147,7 +152,7 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
 
     return _run_frames(
         args, seq.iter_frames(), seq.n_frames, step, reset, picture, seq.frame_name,
-        seq.gt_joints,
+        seq.gt_joints, status,
     )  # fmt: skip
 
 
@@ -206,11 +211,14 @@ def _run_frames(
     picture: Callable[[_Frame, PoseResult], np.ndarray],
     frame_name: Callable[[int], str],
     gt_joints: np.ndarray | None,
+    status: Callable[[], str] | None = None,
 ) -> int:
     """Runs ``step`` over ``frames`` (each a frame or the error reading it raised) and
     writes ``args.out`` (and ``args.viz``, ``args.jsonl``): a frame that fails is
     reported and recorded as NaN, ``reset`` (a tracker's) runs after it, and the other
-    frames are estimated and written."""
+    frames are estimated and written. ``status()`` (a tracker's state, e.g. that it is
+    calibrating) is shown beside the progress bar; the frame that calibrates the body
+    shape is reported on stderr."""
     import json
 
     from ._progress import progress_bar
@@ -235,6 +243,11 @@ def _run_frames(
                 if isinstance(frame, Exception):
                     raise frame
                 res = step(frame)
+                if status is not None:
+                    bar.set_postfix_str(status(), refresh=False)
+                if "calibration" in res.timings:
+                    ms = res.timings["calibration"]
+                    bar.write(f"frame {k}: body shape calibrated in {ms:.0f} ms", file=sys.stderr)
                 if viz_dir:
                     from . import viz
 
@@ -383,7 +396,9 @@ def build_parser() -> argparse.ArgumentParser:
         "recorded as NaN (its index and error are in the output's failed_frames and "
         "errors). The output also holds each frame's body shape ('shape', the model's "
         "shape values): BodyModel() with .shape set to it gives the frame's joints back "
-        "from its 'pose'. Exit code 0: every frame estimated; 1: some failed; "
+        "from its 'pose'. Tracked, the progress bar says while the body shape is being "
+        "calibrated, and the frame that calibrates it is reported on stderr. "
+        "Exit code 0: every frame estimated; 1: some failed; "
         "2: none could be (or the input could not be opened)."
     )
 
