@@ -365,7 +365,7 @@ def test_tracker_recovers_from_a_swapped_start(side_walk, templates):
             pck.append((np.linalg.norm(res.joints - seq["joints"][k], axis=1) < 0.10).mean())
         return tr, np.array(pck)
 
-    # Without the depth checks (the old inlier-share test only) the track stays swapped.
+    # Without the depth checks (the inlier-share test alone) the track stays swapped.
     blind = PipelineConfig(lost_discrepancy=np.inf, lost_ratio=np.inf, recheck_every=0)
     tr, pck = run(blind)
     assert tr.switches == 0 and pck.mean() < 0.8, pck

@@ -885,7 +885,8 @@ class PipelineConfig:
         Tracking: ... or its depth discrepancy exceeds this times the recent median, or
         this value. Default 1.6 and 0.5.
     recheck_every
-        Tracking: the template search runs every this many frames (0 = never). Default 8.
+        Tracking: the template search also runs every this many frames, not only when
+        the track is lost (0 = only when lost). Default 0.
     recheck_hypotheses, lost_hypotheses
         Template hypotheses of a re-check and of a lost frame. Default 4 and 8.
     switch_margin

@@ -181,8 +181,9 @@ class PoseTracker:
     A tracked frame starts from the previous pose moved on by a damped velocity, with a
     prior toward that prediction. When the fit explains too little of the person or the
     depth much worse than lately, the track is lost and the template search runs (the
-    tracked pose among its starts); every ``config.recheck_every`` frames the search
-    runs anyway and the track switches when it finds a clearly better pose.
+    tracked pose among its starts). With ``config.recheck_every`` > 0 the search also
+    runs every that many frames and the track switches when it finds a clearly better
+    pose.
 
     With ``config.learn_background`` and no ``background``, the tracker learns the
     scene's static background over the frames, outside the person's mask, and segments

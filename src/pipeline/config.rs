@@ -50,7 +50,8 @@ pub struct PipelineConfig {
     /// ... or this absolute value.
     pub lost_discrepancy: f64,
     /// Tracking: every this many frames the template search runs again and the track
-    /// switches when a hypothesis explains the depth clearly better (0 = never).
+    /// switches when a hypothesis explains the depth clearly better (0 = never: the
+    /// search runs only when the track is lost).
     pub recheck_every: usize,
     /// ... with this many template hypotheses besides the tracked pose and its
     /// swapped-limbs pose.
@@ -118,7 +119,7 @@ impl Default for PipelineConfig {
             min_inlier_share: 0.75,
             lost_ratio: 1.6,
             lost_discrepancy: 0.5,
-            recheck_every: 8,
+            recheck_every: 0,
             recheck_hypotheses: 4,
             lost_hypotheses: 8,
             switch_margin: 0.1,

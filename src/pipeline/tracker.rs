@@ -5,9 +5,9 @@
 //! the fitted body explains too little of the person or the depth much worse than
 //! lately; a lost frame runs the template search (with the tracked pose and its
 //! readings with left and right exchanged — whole body, legs only, arms only — among
-//! the starts) and keeps its best. Every few frames the search
-//! also runs on a tracked frame, and the track switches when a hypothesis explains the
-//! depth clearly better.
+//! the starts) and keeps its best. With `recheck_every` set, the search also runs every
+//! that many tracked frames, and the track switches when a hypothesis explains the depth
+//! clearly better.
 //!
 //! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
 //! first frame ([`super::size`]). It then collects usable frames (any but a track's
