@@ -98,6 +98,32 @@ def test_estimate_with_a_camera_preset(tmp_path, frames, capsys):
         main(["estimate", str(folder), "--out", str(tmp_path / "a.npz"), "--camera", "nope"])
 
 
+def test_estimate_takes_pipeline_settings(tmp_path, frames, capsys):
+    path = tmp_path / "seq.npz"
+    n = len(frames["depth"])
+    synth.save(path, {k: v[:2] if np.ndim(v) and len(v) == n else v for k, v in frames.items()})
+    outs = {}
+    for name, extra in (("default", []), ("coarse", ["--config", '{"working_focal": 150}'])):
+        outs[name] = tmp_path / f"{name}.npz"
+        assert main(["estimate", str(path), "--out", str(outs[name]), "--no-track", *extra]) == 0
+    # A coarser working resolution gives other joints: the setting reached the pipeline.
+    assert not np.allclose(np.load(outs["default"])["joints"], np.load(outs["coarse"])["joints"])
+    # With --learn-background the two merge.
+    out = str(tmp_path / "learn.npz")
+    config = ["--config", '{"candidates": 6}', "--learn-background"]
+    assert main(["estimate", str(path), "--out", out, *config]) == 0
+    capsys.readouterr()
+    bad = {
+        "{bad": "not valid JSON",
+        "[1]": "expected a JSON object",
+        '{"foo": 1}': "foo: not a PipelineConfig setting",
+        '{"candidates": "x"}': "candidates: expected an integer",
+    }
+    for text, message in bad.items():
+        assert main(["estimate", str(path), "--out", out, "--config", text]) == 2
+        assert f"--config: {message}" in capsys.readouterr().err, text
+
+
 def test_foreground_with_a_camera_preset(tmp_path, frames):
     depth = frames["depth"][:1].astype(np.float32) / 1000
     folder = _folder(tmp_path / "f", depth)

@@ -12,7 +12,7 @@ from typing import TypeVar
 
 import numpy as np
 
-from . import Camera, DepthPoseError, InvalidInputError, PoseResult, __version__
+from . import Camera, DepthPoseError, InvalidInputError, PipelineConfig, PoseResult, __version__
 
 __all__ = ["main"]
 
@@ -110,11 +110,31 @@ def _cmd_foreground(args: argparse.Namespace) -> int:
     return _exit_code(done, failed)
 
 
+def _pipeline_config(text: str | None) -> PipelineConfig:
+    """``--config``: PipelineConfig fields as a JSON object (default: the defaults)."""
+    import json
+
+    if text is None:
+        return PipelineConfig()
+    try:
+        fields = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise InvalidInputError(f"--config: not valid JSON ({e})") from None
+    if not isinstance(fields, dict):
+        raise InvalidInputError(
+            f"--config: expected a JSON object of PipelineConfig fields, got {text!r}"
+        )
+    try:
+        return PipelineConfig(**fields)
+    except DepthPoseError as e:
+        raise type(e)(f"--config: {e}") from None
+
+
 def _cmd_estimate(args: argparse.Namespace) -> int:
     """Poses of every frame of a sequence, a folder of frames or one image, frame by
     frame: a frame that cannot be read or estimated is reported (which, why) and
     recorded as NaN; the others are estimated and written."""
-    from .pipeline import PipelineConfig, PoseEstimator, PoseTracker
+    from .pipeline import PoseEstimator, PoseTracker
     from .sequence import open_sequence
 
     if args.camera is not None and args.intrinsics is not None:
@@ -133,8 +153,10 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
     out = Path(args.out)
     _check_writable(out)
     status: Callable[[], str] | None = None
+    config = _pipeline_config(args.config)
+    if args.learn_background:
+        config = config.replace(learn_background=True)
     if args.track:
-        config = PipelineConfig(learn_background=True) if args.learn_background else None
         tracker = PoseTracker(seq.camera, background=seq.background, config=config)
         step, reset = tracker.update, tracker.reset
 
@@ -142,7 +164,8 @@ def _cmd_estimate(args: argparse.Namespace) -> int:
             return "calibrating the body shape" if tracker.calibrating else ""
 
     else:
-        step, reset = PoseEstimator(seq.camera, background=seq.background).estimate, None
+        estimator = PoseEstimator(seq.camera, background=seq.background, config=config)
+        step, reset = estimator.estimate, None
 
     def picture(depth: np.ndarray, res: PoseResult) -> np.ndarray:
         from . import viz
@@ -383,6 +406,12 @@ def build_parser() -> argparse.ArgumentParser:
         "over the frames and segment the person in front of it once it is known",
     )
     _camera_args(est)
+    est.add_argument(
+        "--config",
+        metavar="JSON",
+        help="PipelineConfig fields as a JSON object, e.g. "
+        '\'{"candidates": 8, "hypotheses": 40}\' for a wider search (offline)',
+    )
     est.add_argument(
         "--glob",
         metavar="PATTERN",
