@@ -36,14 +36,13 @@ def measure(names: list[str], upsample: int, background: bool, scratch_step: int
         d = np.load(DATA / f"{name}.npz")
         depth = d["depth"]
         fx, fy, cx, cy = (float(v) for v in d["intrinsics"])
+        cam = dp.Camera(fx, fy, cx, cy, depth.shape[2], depth.shape[1])
         bg = d["background"] if background else None
         if upsample > 1:
             u = upsample
             depth = depth.repeat(u, axis=1).repeat(u, axis=2)
             bg = None if bg is None else bg.repeat(u, axis=0).repeat(u, axis=1)
-            fx, fy, cx, cy = u * fx, u * fy, u * (cx + 0.5) - 0.5, u * (cy + 0.5) - 0.5
-        h, w = depth.shape[1:]
-        cam = dp.Camera(fx, fy, cx, cy, w, h)
+            cam = cam.scaled(u)
         tr = dp.PoseTracker(cam, background=bg)
         for k in range(depth.shape[0]):
             t0 = time.perf_counter()

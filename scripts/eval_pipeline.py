@@ -72,16 +72,11 @@ def _iou(a: np.ndarray, b: np.ndarray) -> float:
 def _upsampled(depth, camera, background, u: int):
     """Each pixel repeated u×u times, the intrinsics scaled to match (a sensor of u times
     the resolution seeing the same scene)."""
-    import depthpose as dp
-
     if u == 1:
         return depth, camera, background
     depth = depth.repeat(u, axis=1).repeat(u, axis=2)
     background = None if background is None else background.repeat(u, axis=0).repeat(u, axis=1)
-    c = camera
-    camera = dp.Camera(u * c.fx, u * c.fy, u * (c.cx + 0.5) - 0.5, u * (c.cy + 0.5) - 0.5,
-                       u * c.width, u * c.height)  # fmt: skip
-    return depth, camera, background
+    return depth, camera.scaled(u), background
 
 
 def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None,

@@ -219,8 +219,13 @@ impl Tracker {
             self.track.recent.push_back(res.discrepancy);
         }
         let mut res = res;
-        self.learn_background(&frame, &mut res)?;
-        if self.calibrating() && !first && self.explains_enough(&frame, &frame.labels) {
+        // Whether the fit explains the person decides what the background model and the
+        // shape calibration take from the frame; counted only when either wants it.
+        let calibrate = self.calibrating() && !first;
+        let explained =
+            (calibrate || self.background.is_some()) && self.explains_enough(&frame, &frame.labels);
+        self.learn_background(&frame, explained, &mut res)?;
+        if calibrate && explained {
             self.collect(frame, &mut res);
         }
         Ok(res)
@@ -390,11 +395,15 @@ impl Tracker {
         self.background.as_ref()
     }
 
-    /// Learns the background from a frame whose fit explains the person (outside its
-    /// mask) and hands what is reliably known to the next frame's segmentation; the
-    /// time it takes is the result's `background` stage.
-    fn learn_background(&mut self, frame: &Frame, res: &mut PoseResult) -> Result<()> {
-        let explained = self.explains_enough(frame, &frame.labels);
+    /// Learns the background from the frame when its fit `explained` the person
+    /// (outside its mask) and hands what is reliably known to the next frame's
+    /// segmentation; the time it takes is the result's `background` stage.
+    fn learn_background(
+        &mut self,
+        frame: &Frame,
+        explained: bool,
+        res: &mut PoseResult,
+    ) -> Result<()> {
         let Some(model) = self.background.as_mut() else {
             return Ok(());
         };

@@ -62,6 +62,14 @@ fn standing(model: &BodyModel, floor: f64, x: f64, z: f64) -> crate::body::Pose 
     pose
 }
 
+/// Pastes the body standing on `room`'s floor, its hip at (`x`, `z`), over `scene`;
+/// returns the body's pixels.
+fn paste_standing(scene: &mut [f32], room: &Room, model: &BodyModel, x: f64, z: f64) -> Vec<bool> {
+    let pose = standing(model, room.floor, x, z);
+    let (body, _) = model.render_depth(&pose, &room.camera);
+    paste(scene, &body)
+}
+
 /// Pastes a rendered body (depth 0 = none) over `scene`; returns the body's pixels.
 fn paste(scene: &mut [f32], body: &[f32]) -> Vec<bool> {
     let mut mask = vec![false; scene.len()];
@@ -106,9 +114,7 @@ fn a_person_in_a_room_is_found_without_a_background() {
     let room = Room::new();
     let model = BodyModel::new(1.75).unwrap();
     let mut scene = room.depth();
-    let pose = standing(&model, room.floor, 0.2, 3.0);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.2, 3.0);
     let seg = segment(&scene, &room.camera, None).unwrap();
     assert_eq!(seg.method, Method::Planes);
     assert_eq!(seg.planes.len(), 2, "floor and wall: {:?}", seg.planes);
@@ -156,9 +162,7 @@ fn clutter_beside_the_person_is_left_out() {
         (room.floor - 1.2, room.floor),
         3.6,
     );
-    let pose = standing(&model, room.floor, 0.0, 3.0);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.0, 3.0);
     let seg = segment(&scene, &room.camera, None).unwrap();
     assert_eq!(seg.planes.len(), 3, "{:?}", seg.planes);
     let score = iou(&seg.mask, &truth);
@@ -171,9 +175,7 @@ fn a_person_touching_the_wall_is_found() {
     room.wall = 3.25;
     let model = BodyModel::new(1.75).unwrap();
     let mut scene = room.depth();
-    let pose = standing(&model, room.floor, 0.0, 3.1);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.0, 3.1);
     let seg = segment(&scene, &room.camera, None).unwrap();
     let score = iou(&seg.mask, &truth);
     // The back of the body within the sensor's tolerance of the wall goes with it.
@@ -185,12 +187,8 @@ fn two_people_the_nearer_is_chosen_then_the_tracked_one_is_kept() {
     let room = Room::new();
     let model = BodyModel::new(1.75).unwrap();
     let mut scene = room.depth();
-    let far = standing(&model, room.floor, -0.7, 3.6);
-    let near = standing(&model, room.floor, 0.7, 2.6);
-    let (body_far, _) = model.render_depth(&far, &room.camera);
-    let (body_near, _) = model.render_depth(&near, &room.camera);
-    let truth_far = paste(&mut scene, &body_far);
-    let truth_near = paste(&mut scene, &body_near);
+    let truth_far = paste_standing(&mut scene, &room, &model, -0.7, 3.6);
+    let truth_near = paste_standing(&mut scene, &room, &model, 0.7, 2.6);
     let seg = segment(&scene, &room.camera, None).unwrap();
     assert!(iou(&seg.mask, &truth_near) > 0.95);
     assert_eq!(seg.others.len(), 1, "the other person is reported");
@@ -220,9 +218,7 @@ fn the_previous_planes_are_reused() {
     let room = Room::new();
     let model = BodyModel::new(1.75).unwrap();
     let mut scene = room.depth();
-    let pose = standing(&model, room.floor, 0.0, 3.0);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.0, 3.0);
     let first = segment(&scene, &room.camera, None).unwrap();
     let next = segment(&scene, &room.camera, Some(&first.hint())).unwrap();
     assert_eq!(next.planes.len(), first.planes.len());
@@ -251,9 +247,7 @@ fn a_background_frame_is_used_when_given() {
     let model = BodyModel::new(1.75).unwrap();
     let bg = room.depth();
     let mut scene = bg.clone();
-    let pose = standing(&model, room.floor, 0.0, 3.0);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.0, 3.0);
     let c = &room.camera;
     let view = DepthView::new(&scene, c.height, c.width, "depth").unwrap();
     let bgv = DepthView::new(&bg, c.height, c.width, "background").unwrap();
@@ -347,9 +341,7 @@ fn a_learned_background_decides_the_pixels_it_knows_and_planes_the_rest() {
     paste_box(&mut empty, &room.camera, (0.7, 1.2), (0.5, 1.0), 2.8);
     paste_box(&mut empty, &room.camera, (-1.4, -1.0), (-0.2, 1.0), 3.6);
     let mut scene = empty.clone();
-    let pose = standing(&model, room.floor, 0.0, 3.0);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.0, 3.0);
     // The person has stood still with its left half all along: unknown around there.
     let w = room.camera.width;
     let person: Vec<usize> = (0..truth.len()).filter(|&i| truth[i]).collect();
@@ -384,9 +376,7 @@ fn a_person_touching_the_wall_is_cut_closer_with_a_learned_background() {
     let model = BodyModel::new(1.75).unwrap();
     let empty = room.depth();
     let mut scene = empty.clone();
-    let pose = standing(&model, room.floor, 0.0, 3.1);
-    let (body, _) = model.render_depth(&pose, &room.camera);
-    let truth = paste(&mut scene, &body);
+    let truth = paste_standing(&mut scene, &room, &model, 0.0, 3.1);
     let planes = iou(&segment(&scene, &room.camera, None).unwrap().mask, &truth);
     let seg = segment(&scene, &room.camera, Some(&learned_hint(empty))).unwrap();
     let learned = iou(&seg.mask, &truth);
