@@ -12,7 +12,7 @@ SGBM's matching alone, frame by frame.
 
 Usage::
 
-    python scripts/eval_stereo_pose.py [--data ../shared/data/stereo_person] [--json-out F]
+    python scripts/eval_stereo_pose.py [--data DIR] [--json-out F] [--disparity-sigma PX]
 """
 
 from __future__ import annotations
@@ -54,14 +54,20 @@ def sgbm(left: np.ndarray, right: np.ndarray) -> tuple[float, np.ndarray] | None
     return ms, disparity
 
 
-def run(path: Path, mode: str, templates: dp.TemplateDatabase) -> dict:
+def run(path: Path, mode: str, templates: dp.TemplateDatabase, disparity_sigma: float) -> dict:
     data = np.load(path)
     fx, fy, cx, cy = data["intrinsics"]
     h, w = data["left"].shape[1:]
     camera = dp.Camera(fx, fy, cx, cy, w, h)
     background = (data["left_bg"], data["right_bg"]) if "background" in mode else None
     cls = dp.StereoPoseTracker if mode.startswith("tracked") else dp.StereoPoseEstimator
-    pipeline = cls(camera, float(data["baseline"]), background=background, templates=templates)
+    pipeline = cls(
+        camera,
+        float(data["baseline"]),
+        background=background,
+        templates=templates,
+        disparity_sigma=disparity_sigma,
+    )
     errors, ms, ratios, kept, raw, peer = [], [], [], [], [], []
     for k in range(len(data["left"])):
         left, right = data["left"][k], data["right"][k]
@@ -106,6 +112,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--data", type=Path, default=DEFAULT_DATA)
     ap.add_argument("--json-out", type=Path)
+    ap.add_argument(
+        "--disparity-sigma",
+        type=float,
+        default=0.0,
+        help="disparity error (px) the fit weighs points by (default 0: alike)",
+    )
     args = ap.parse_args()
     paths = sorted(args.data.glob("*.npz"))
     if not paths:
@@ -116,7 +128,7 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     for path in paths:
         for mode in MODES:
-            r = run(path, mode, templates)
+            r = run(path, mode, templates, args.disparity_sigma)
             table.setdefault(path.stem, {})[mode] = r
             mpjpe = "—" if r["mpjpe_mm"] is None else f"{r['mpjpe_mm']:.0f}"
             print(

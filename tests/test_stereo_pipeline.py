@@ -175,6 +175,20 @@ def test_fattening_removal_keeps_the_person_and_drops_no_interior_match(pair):
     assert np.array_equal(kept.disparity[kept_same], raw.disparity[kept_same])
 
 
+def test_weighing_points_by_depth_noise_fits_the_pair_too(pair):
+    """With ``disparity_sigma`` the fit weighs points by their depth noise: a
+    different fit of the same disparity, the joints but at most one within 10 cm (a
+    hand drifts: weighing the far points down is not better here, which is why it is
+    off by default)."""
+    left, right, _, truth, camera, _ = pair
+    alike = dp.StereoPoseEstimator(camera, BASELINE).estimate(left, right)
+    weighed = dp.StereoPoseEstimator(camera, BASELINE, disparity_sigma=0.25)
+    res = weighed.estimate(left, right)
+    assert not np.array_equal(res.pose, alike.pose)
+    err = np.linalg.norm(res.joints - truth, axis=1)
+    assert (err < 0.10).sum() >= 14, dict(zip(JOINT_NAMES, np.round(err, 3), strict=True))
+
+
 def test_tracker_follows_pairs_and_keeps_the_disparity(pair):
     left, right, _, truth, camera, _ = pair
     tracker = dp.StereoPoseTracker(camera, BASELINE, calibrate=False)
@@ -200,6 +214,9 @@ def test_stereo_pose_rejects_bad_arguments(pair):
                              background_depth=background)  # fmt: skip
     with pytest.raises(dp.DepthPoseError, match="disparity_tolerance"):
         dp.StereoPoseTracker(camera, BASELINE, disparity_tolerance=-1.0)
+    for bad in (-0.5, float("nan")):
+        with pytest.raises(dp.InvalidInputError, match="disparity_sigma"):
+            dp.StereoPoseTracker(camera, BASELINE, disparity_sigma=bad)
     with pytest.raises(dp.DepthPoseError, match="doffs"):
         dp.StereoPoseTracker(camera, BASELINE, doffs=float("inf"))
 

@@ -1061,6 +1061,7 @@ class _StereoPose:
         max_disparity: int | None = None,
         fattening: bool = ...,
         disparity_tolerance: float = ...,
+        disparity_sigma: float = ...,
     ) -> _StereoPose: ...
     def update(
         self,

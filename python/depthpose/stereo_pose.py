@@ -76,6 +76,11 @@ class StereoPoseTracker:
     disparity_tolerance
         Disparity error (pixels) the segmentation tolerates on a floor, a wall or
         against the background (default 1).
+    disparity_sigma
+        The matched disparity's standard deviation in pixels, for the fit to weigh
+        each point by how precisely its depth is known: 1/(σ² + σ_Z²), σ_Z =
+        Z²·disparity_sigma/(f·B) growing with depth (about 0.25 for this matcher on
+        textured surfaces). Default 0: every point alike.
 
     Raises
     ------
@@ -100,6 +105,7 @@ class StereoPoseTracker:
         max_disparity: int | None = None,
         fattening: bool = True,
         disparity_tolerance: float = 1.0,
+        disparity_sigma: float = 0.0,
     ) -> None:
         _check(camera, model, config)
         self._native = _core._StereoPose(
@@ -116,6 +122,7 @@ class StereoPoseTracker:
             max_disparity=max_disparity,
             fattening=fattening,
             disparity_tolerance=disparity_tolerance,
+            disparity_sigma=disparity_sigma,
         )
 
     def update(

@@ -8,6 +8,7 @@
 pub mod em;
 pub mod ik;
 pub mod lm;
+pub mod noise;
 pub mod shape;
 pub mod start;
 pub mod system;
@@ -27,10 +28,11 @@ use terms::free_space::{FreeSpaceImage, FreeSpaceTerm};
 
 pub use em::{
     hard_em, hard_em_from, label_points, EmConfig, EmOptions, EmResult, EmResume, EmTermination,
-    PointLabels, OUTLIER,
+    PointLabels, UnaryAt, OUTLIER,
 };
 pub use ik::pose_from_joints;
 pub use lm::{LevenbergMarquardt, LmConfig, LmReport, Termination};
+pub use noise::DepthNoise;
 pub use shape::{fit_shape, shape_lm, ShapeConfig, ShapeFrame, ShapeResult};
 pub use terms::Loss;
 pub use terms::PosePrior;
@@ -68,6 +70,10 @@ pub struct FitConfig {
     /// `recentred_start` is on), and keeps the lowest-energy EM: up to 3× the work, for
     /// starts that may have a limb on the wrong side (off by default).
     pub swapped_limb_starts: bool,
+    /// The sensor's depth noise when it grows with depth (a stereo pair): each point's
+    /// data terms are weighted by how precisely its depth is known ([`noise`]). None:
+    /// every point alike.
+    pub depth_noise: Option<DepthNoise>,
 }
 
 /// Largest accepted [`FitConfig::stride`].
@@ -86,6 +92,7 @@ impl Default for FitConfig {
             full_resolution_iterations: 0,
             recentred_start: true,
             swapped_limb_starts: false,
+            depth_noise: None,
         }
     }
 }
@@ -94,6 +101,9 @@ impl FitConfig {
     /// Checks every field, naming the bad one.
     pub fn validate(&self) -> Result<()> {
         self.em.validate()?;
+        if let Some(n) = &self.depth_noise {
+            n.validate()?;
+        }
         if self.stride == 0 || self.stride > MAX_STRIDE {
             return Err(Error::invalid(
                 "stride",
@@ -219,6 +229,34 @@ pub struct FitProblem {
     /// camera and graph, and the sub-sampled depth image (empty when the free-space
     /// term is off).
     sub: Option<(Cloud, Camera, PixelGraph, Vec<f32>)>,
+    /// With [`FitConfig::depth_noise`]: the weights of the points of `cloud` and of the
+    /// sub-sampled cloud (see [`DepthNoise::point_weights`]); else empty.
+    weights: PointWeights,
+}
+
+/// The weights of a fit problem's points (empty without depth noise).
+#[derive(Default)]
+struct PointWeights {
+    full: Vec<f32>,
+    sub: Vec<f32>,
+}
+
+impl PointWeights {
+    fn new(config: &FitConfig, cloud: &Cloud, sub: Option<&Cloud>) -> Self {
+        let Some(noise) = &config.depth_noise else {
+            return PointWeights::default();
+        };
+        let sigma = config.em.sigma;
+        PointWeights {
+            full: noise.point_weights(&cloud.points, sigma),
+            sub: sub.map_or_else(Vec::new, |c| noise.point_weights(&c.points, sigma)),
+        }
+    }
+}
+
+/// `weights` as a fit takes them (None when empty).
+fn weights_of(weights: &[f32]) -> Option<&[f32]> {
+    (!weights.is_empty()).then_some(weights)
 }
 
 impl FitProblem {
@@ -258,9 +296,11 @@ impl FitProblem {
             None
         };
         let free_space = config.em.free_space_weight > 0.0;
+        let weights = PointWeights::new(config, &cloud, sub.as_ref().map(|s| &s.0));
         Ok(FitProblem {
             camera: *camera,
             config: *config,
+            weights,
             cloud,
             graph,
             depth: if free_space {
@@ -285,6 +325,11 @@ impl FitProblem {
                 "config",
                 "a fit problem keeps its stride, connectivity and free-space term",
             ));
+        }
+        if config.depth_noise != self.config.depth_noise || config.em.sigma != self.config.em.sigma
+        {
+            let sub = self.sub.as_ref().map(|s| &s.0);
+            self.weights = PointWeights::new(config, &self.cloud, sub);
         }
         self.config = *config;
         Ok(())
@@ -467,6 +512,7 @@ impl FitProblem {
                 resume,
                 prior,
                 free_space,
+                point_weights: weights_of(&self.weights.full),
             };
             return hard_em_from(
                 model,
@@ -494,6 +540,7 @@ impl FitProblem {
             resume,
             prior: scaled_prior.as_ref(),
             free_space,
+            point_weights: weights_of(&self.weights.sub),
         };
         hard_em_from(
             model,
@@ -582,15 +629,15 @@ impl FitProblem {
             expansion_cycles: 1,
             ..config.em
         };
-        let (final_labels, crf) = label_points(
+        let at = UnaryAt {
             model,
-            &cloud.points,
-            graph,
-            &em.pose,
-            &init_labels,
+            points: &cloud.points,
+            weights: weights_of(&self.weights.full),
+            pose: &em.pose,
+            config: &final_em,
             tau,
-            &final_em,
-        )?;
+        };
+        let (final_labels, crf) = label_points(&at, graph, &init_labels)?;
         if config.full_resolution_iterations > 0 {
             // Coarse to fine: the EM goes on at full resolution from the strided pose and
             // this labelling (τ continues its annealing at the strided EM's count).
@@ -613,6 +660,7 @@ impl FitProblem {
                 resume: Some(resume),
                 prior,
                 free_space,
+                point_weights: weights_of(&self.weights.full),
             };
             let fine = hard_em_from(model, &cloud.points, graph, &em.pose, options, &fine_config)?;
             // The fine stage is a bounded refinement: spending its budget says nothing

@@ -39,6 +39,7 @@ struct StereoArgs {
     max_disparity: Option<Int>,
     fattening: Flag,
     disparity_tolerance: Real,
+    disparity_sigma: Real,
 }
 
 impl StereoArgs {
@@ -53,6 +54,7 @@ impl StereoArgs {
             c.fattening = None;
         }
         c.disparity_tolerance = self.disparity_tolerance.get_f32("disparity_tolerance")?;
+        c.disparity_sigma = self.disparity_sigma.get_f32("disparity_sigma")?;
         Ok(c)
     }
 }
@@ -68,7 +70,8 @@ impl PyStereoPose {
     #[new]
     #[pyo3(signature = (camera, templates, baseline, *, doffs=Real::new(0.0), model=None, config=None,
         background=None, background_depth=None, track=Flag::new(true), calibrate=None, max_disparity=None,
-        fattening=Flag::new(true), disparity_tolerance=Real::new(1.0)))]
+        fattening=Flag::new(true), disparity_tolerance=Real::new(1.0),
+        disparity_sigma=Real::new(0.0)))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -85,6 +88,7 @@ impl PyStereoPose {
         max_disparity: Option<Int>,
         fattening: Flag,
         disparity_tolerance: Real,
+        disparity_sigma: Real,
     ) -> PyResult<Self> {
         let track = track.get("track")?;
         let calibrate = match &calibrate {
@@ -106,10 +110,12 @@ impl PyStereoPose {
             max_disparity,
             fattening,
             disparity_tolerance,
+            disparity_sigma,
         }
         .config()?;
         let mut stereo = StereoDepth::new(&parts.camera, rig, stereo_config)?;
         parts.config.segment = stereo.segment_config(&parts.config.segment);
+        parts.config.fit = stereo.fit_config(&parts.config.fit);
         let bg = background
             .map(|(l, r)| pair(&parts.camera, &l, &r, ["background[0]", "background[1]"]))
             .transpose()?;

@@ -66,11 +66,12 @@ pub fn crf_energy(unary: &[f64], edges: &[[u32; 2]], weights: &[f64], labels: &[
 }
 
 /// What an E-step's terms are computed from, fixed for a fit: the body model, the
-/// points and the settings.
+/// points (and their weights, see [`UnaryAt::weights`]) and the settings.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct EmInputs<'a> {
     pub model: &'a BodyModel,
     pub points: &'a [[f32; 3]],
+    pub weights: Option<&'a [f32]>,
     pub config: &'a EmConfig,
 }
 
@@ -83,6 +84,7 @@ impl<'a> EmInputs<'a> {
         UnaryAt {
             model: self.model,
             points: self.points,
+            weights: self.weights,
             pose,
             config: self.config,
             tau,
@@ -331,21 +333,26 @@ impl<'g> EStep<'g> {
     }
 }
 
-/// One E-step on its own: the CRF labels of `points` for a fixed `pose` at outlier
-/// distance `tau`, by alpha-expansion from `init` (labels in `0..NUM_LABELS`, the outlier
-/// label being [`NUM_SEGMENTS`]). Returns the labels and the CRF energy. Used to label
-/// the full-resolution cloud after EM ran on a sub-sampled one.
+/// One E-step on its own: the CRF labels of `at.points` (with their `graph`) for the
+/// fixed pose and outlier distance of `at`, by alpha-expansion from `init` (labels in
+/// `0..NUM_LABELS`, the outlier label being [`NUM_SEGMENTS`]). Returns the labels and
+/// the CRF energy. Used to label the full-resolution cloud after EM ran on a
+/// sub-sampled one.
 ///
 /// [`NUM_SEGMENTS`]: crate::body::NUM_SEGMENTS
 pub fn label_points(
-    model: &BodyModel,
-    points: &[[f32; 3]],
+    at: &UnaryAt<'_>,
     graph: &PixelGraph,
-    pose: &Pose,
     init: &[i32],
-    tau: f64,
-    config: &EmConfig,
 ) -> Result<(PointLabels, f64)> {
+    let UnaryAt {
+        model,
+        points,
+        weights,
+        pose,
+        config,
+        tau,
+    } = *at;
     config.validate()?;
     let n = points.len();
     if init.len() != n {
@@ -354,9 +361,11 @@ pub fn label_points(
             format!("has {} labels for {n} points", init.len()),
         ));
     }
+    super::run::check_weights(weights, n)?;
     let inputs = EmInputs {
         model,
         points,
+        weights,
         config,
     };
     let mut crf = EStep::at_pose(graph, inputs, pose, tau, Some(init))?;

@@ -40,6 +40,10 @@ pub struct EmOptions<'a> {
     pub prior: Option<&'a PosePrior>,
     /// The depth image the points came from, for the free-space term.
     pub free_space: Option<FreeSpaceImage<'a>>,
+    /// Per point, a weight (finite, > 0) its data terms are multiplied by, in the
+    /// E-step and the M-step alike: how much its reading is trusted (see
+    /// [`crate::fit::DepthNoise`]). None: all 1.
+    pub point_weights: Option<&'a [f32]>,
 }
 
 /// [`hard_em`] with the `options`. With a `resume`, the continuation of that run: from
@@ -80,6 +84,7 @@ pub(super) fn run_hard_em(
     let inputs = EmInputs {
         model,
         points,
+        weights: options.point_weights,
         config,
     };
     let mut run = EmRun::new(inputs, graph, init, options, m_steps_ahead)?;
@@ -116,6 +121,7 @@ fn check_inputs(
     if n == 0 {
         return Err(Error::NoBody("no foreground points to fit".into()));
     }
+    check_weights(options.point_weights, n)?;
     if let Some(i) = init.iter().position(|v| !v.is_finite()) {
         return Err(Error::invalid(
             "init_pose",
@@ -138,6 +144,24 @@ fn check_inputs(
                 ),
             ));
         }
+    }
+    Ok(())
+}
+
+/// Checks that `weights`, if any, has one finite positive weight per point.
+pub(super) fn check_weights(weights: Option<&[f32]>, n: usize) -> Result<()> {
+    let Some(w) = weights else { return Ok(()) };
+    if w.len() != n {
+        return Err(Error::invalid(
+            "point_weights",
+            format!("has {} weights for {n} points", w.len()),
+        ));
+    }
+    if let Some(i) = w.iter().position(|&v| !(v.is_finite() && v > 0.0)) {
+        return Err(Error::invalid(
+            "point_weights",
+            format!("weight {i} is {}, not finite and > 0", w[i]),
+        ));
     }
     Ok(())
 }
@@ -190,6 +214,7 @@ impl<'a> EmRun<'a> {
         let EmInputs {
             model,
             points,
+            weights,
             config,
         } = inputs;
         let free_space_term = || {
@@ -225,7 +250,8 @@ impl<'a> EmRun<'a> {
                 points,
                 &vec![OUTLIER; n],
                 config.point_cost(tau),
-            ),
+            )
+            .with_weights(weights),
             ahead: MStepsAhead::default(),
             pose,
             tau,
@@ -488,6 +514,7 @@ impl<'a> EmRun<'a> {
             model,
             points,
             config,
+            ..
         } = self.inputs;
         let annealed = config.annealed_in(self.iterations, self.anneal_cut);
         if changed == 0 && !pose_moved {

@@ -196,6 +196,7 @@ fn e_step_candidate_sets_are_the_solvers() {
     let inputs = EmInputs {
         model: &model,
         points,
+        weights: None,
         config: &config,
     };
     let mut crf = EStep::new(&graph, inputs).unwrap();
@@ -271,6 +272,7 @@ fn fresh_start_terms_give_the_exact_cheapest_labels_and_sets() {
     let inputs = EmInputs {
         model: &model,
         points,
+        weights: None,
         config: &config,
     };
     for (seed, tau) in [(7, config.outlier_distance_at(0)), (8, 0.1)] {
@@ -319,6 +321,7 @@ fn own_distances_from_the_m_step_give_the_same_terms() {
     let inputs = EmInputs {
         model: &model,
         points,
+        weights: None,
         config: &config,
     };
     let mut crf = EStep::at_pose(&graph, inputs, &start, tau, None).unwrap();
@@ -423,6 +426,47 @@ fn unary_for_labels_skips_only_terms_out_of_reach() {
         }
     }
     assert!(n_skipped > n, "the skipping is exercised: {n_skipped}");
+    // With weights: each row is its weight times the unweighted one, a term skipped
+    // only where the weighted rows put it out of reach.
+    let weights: Vec<f32> = (0..n).map(|i| 0.2 + 0.3 * (i % 7) as f32).collect();
+    let at = UnaryAt {
+        model: &model,
+        points: &points,
+        weights: Some(&weights),
+        pose: &pose,
+        config: &config,
+        tau,
+    };
+    let mut weighted = vec![-1.0; n * NUM_LABELS];
+    let mut weighted_skipped = vec![u32::MAX; n];
+    let request = super::unary::UnaryRequest {
+        held: Some(HeldLabels {
+            labels: &labels,
+            slack: &slack,
+            skipped: &mut weighted_skipped,
+        }),
+        ..Default::default()
+    };
+    super::unary::fill_unary(&at, request, &mut weighted);
+    let mut n_weighted_skipped = 0;
+    for i in 0..n {
+        let w = weights[i] as f64;
+        let own = w * exact[i * NUM_LABELS + labels[i] as usize];
+        for k in 0..NUM_LABELS {
+            let (got, want) = (weighted[i * NUM_LABELS + k], w * exact[i * NUM_LABELS + k]);
+            if weighted_skipped[i] >> k & 1 == 1 {
+                n_weighted_skipped += 1;
+                assert_eq!(got, w * cap);
+                assert!(want - own > slack[i], "point {i} segment {k}: {want} {own}");
+            } else {
+                assert!(
+                    (got - want).abs() <= 1e-12 * want.max(1.0),
+                    "{i} {k}: {got} {want}"
+                );
+            }
+        }
+    }
+    assert!(n_weighted_skipped > n, "{n_weighted_skipped}");
     // Points moved to a skipped segment get its exact term back.
     let moved: Vec<i32> = (0..n)
         .map(|i| match skipped[i].trailing_zeros() {
@@ -433,6 +477,7 @@ fn unary_for_labels_skips_only_terms_out_of_reach() {
     let at = UnaryAt {
         model: &model,
         points: &points,
+        weights: None,
         pose: &pose,
         config: &config,
         tau,
@@ -446,5 +491,76 @@ fn unary_for_labels_skips_only_terms_out_of_reach() {
         let k = i * NUM_LABELS + l as usize;
         assert!((unary[k] - exact[k]).abs() <= 1e-12 * exact[k].max(1.0));
         assert_eq!(skipped[i] >> l & 1, 0);
+    }
+}
+
+/// Weights that vary with depth (as [`crate::fit::DepthNoise`] gives them): every
+/// E-step row is its weight times the unweighted row (the terms an expansion can use
+/// exactly, the others capped), the EM's energy never increases, and weights of 1
+/// give the unweighted EM exactly.
+#[test]
+fn weighted_points_scale_their_terms_and_keep_the_em_monotone() {
+    use crate::body::param;
+    let model = BodyModel::default();
+    let (truth, cloud, graph) = bent_frame(&model, param::R_ELBOW, 1.0);
+    let n = cloud.len();
+    let weights: Vec<f32> = cloud
+        .points
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (0.5 + 0.5 * (p[2] - 2.0).abs() + 0.25 * (i % 3) as f32).max(0.05))
+        .collect();
+    let config = EmConfig::default();
+    let init = crate::fit::tests::perturbed(&truth, 3, 0.15, 0.04);
+    let tau = config.outlier_distance_at(0);
+    // The rows at the start, all terms.
+    let mut plain = vec![0.0; n * NUM_LABELS];
+    unary_costs(&model, &cloud.points, &init, &config, tau, &mut plain);
+    let at = UnaryAt {
+        model: &model,
+        points: &cloud.points,
+        weights: Some(&weights),
+        pose: &init,
+        config: &config,
+        tau,
+    };
+    let mut weighted = vec![0.0; n * NUM_LABELS];
+    super::unary::fill_unary(&at, Default::default(), &mut weighted);
+    for i in 0..n {
+        for a in 0..NUM_LABELS {
+            let (u, v) = (plain[i * NUM_LABELS + a], weighted[i * NUM_LABELS + a]);
+            assert_eq!(v, weights[i] as f64 * u, "point {i} label {a}");
+        }
+    }
+    // The EM: monotone energy, and a different fit from the unweighted one.
+    let run = |w: Option<&[f32]>| {
+        let options = EmOptions {
+            point_weights: w,
+            ..EmOptions::default()
+        };
+        run_hard_em(&model, &cloud.points, &graph, &init, options, &config, true)
+            .unwrap()
+            .0
+    };
+    let em = run(Some(&weights));
+    for pair in em.energy_trace.windows(2) {
+        assert!(pair[1] <= pair[0] * (1.0 + 1e-9), "{:?}", em.energy_trace);
+    }
+    let unweighted = run(None);
+    assert_ne!(em.energy, unweighted.energy);
+    let ones = vec![1.0f32; n];
+    assert!(run(Some(&ones)) == unweighted);
+    // A weight per point, finite and positive.
+    let mut zero = ones.clone();
+    zero[5] = 0.0;
+    for bad in [&ones[1..], &zero[..]] {
+        let options = EmOptions {
+            point_weights: Some(bad),
+            ..EmOptions::default()
+        };
+        let err = run_hard_em(&model, &cloud.points, &graph, &init, options, &config, true)
+            .err()
+            .unwrap();
+        assert!(err.to_string().contains("point_weights"), "{err}");
     }
 }

@@ -11,12 +11,15 @@ use crate::fit::terms::PointCost;
 use crate::graphcut::expansion::potts_candidate_mask;
 use rayon::prelude::*;
 
-/// Where the unary terms are evaluated: the points and the model at a pose, with the
-/// settings and the outlier distance τ.
+/// Where the unary terms are evaluated: the points (and their weights) and the model at
+/// a pose, with the settings and the outlier distance τ.
 #[derive(Debug, Clone, Copy)]
 pub struct UnaryAt<'a> {
     pub model: &'a BodyModel,
     pub points: &'a [[f32; 3]],
+    /// Per point, a weight (finite, > 0) its whole row of terms is multiplied by: how
+    /// much its reading is trusted (see [`crate::fit::DepthNoise`]). None: all 1.
+    pub weights: Option<&'a [f32]>,
     pub pose: &'a Pose,
     pub config: &'a EmConfig,
     pub tau: f64,
@@ -49,6 +52,7 @@ pub fn unary_costs(
     let at = UnaryAt {
         model,
         points,
+        weights: None,
         pose,
         config,
         tau,
@@ -89,6 +93,7 @@ pub fn unary_costs_for_labels(
     let at = UnaryAt {
         model,
         points,
+        weights: None,
         pose,
         config,
         tau,
@@ -113,6 +118,7 @@ pub(super) fn fill_unary(at: &UnaryAt<'_>, request: UnaryRequest<'_>, unary: &mu
     let UnaryAt {
         model,
         points,
+        weights,
         pose,
         config,
         tau,
@@ -135,7 +141,9 @@ pub(super) fn fill_unary(at: &UnaryAt<'_>, request: UnaryRequest<'_>, unary: &mu
                  pts: &[[f32; 3]],
                  held: Option<(&[i32], &[f64], &mut [u32])>,
                  words: Option<&mut [u64]>| {
-        let own = own.map(|d| &d[c * CHUNK_POINTS..c * CHUNK_POINTS + pts.len()]);
+        let range = c * CHUNK_POINTS..c * CHUNK_POINTS + pts.len();
+        let own = own.map(|d| &d[range.clone()]);
+        let weights = weights.map(|w| &w[range]);
         let held = held.map(|(labels, slack, skipped)| ChunkHeld {
             labels,
             slack,
@@ -143,7 +151,7 @@ pub(super) fn fill_unary(at: &UnaryAt<'_>, request: UnaryRequest<'_>, unary: &mu
             own_distance: own,
             candidate_words: words,
         });
-        unary_chunk(&costs, u, pts, held)
+        unary_chunk(&costs, u, pts, held, weights)
     };
     let rows = unary.par_chunks_mut(CHUNK_POINTS * NUM_LABELS);
     let pts = points.par_chunks(CHUNK_POINTS).enumerate();
@@ -309,12 +317,19 @@ impl GroupedPoints {
 /// [`fill_unary`] for one chunk of points: every segment's term starts at the cap and
 /// the outlier's at its cost; with held labels each point's own label's term is exact
 /// ([`own_label_terms`]); then every segment's terms of the points near enough to need
-/// the exact distance ([`segment_terms`]), and the expansion's candidate sets.
+/// the exact distance ([`segment_terms`]), each row times its point's weight, and the
+/// expansion's candidate sets.
+///
+/// With weights the terms are computed unweighted and scaled afterwards; what limits
+/// the work is the weighted rows' reach: a term k is out of an expansion's reach when
+/// w·(c_k − c_own) exceeds the slack, i.e. when c_k − c_own exceeds slack / w, so the
+/// unweighted computation runs with the slacks divided by the weights.
 fn unary_chunk(
     costs: &ChunkCosts<'_>,
     u: &mut [f64],
     pts: &[[f32; 3]],
     held: Option<ChunkHeld<'_>>,
+    weights: Option<&[f32]>,
 ) {
     let cap = costs.pc.cap();
     let mut buf = [[0.0f64; 3]; CHUNK_POINTS];
@@ -329,13 +344,20 @@ fn unary_chunk(
         row[NUM_SEGMENTS] = costs.outlier;
     }
     let mut groups = PointGroups::new();
+    let mut unweighted_slack = [0.0f64; CHUNK_POINTS];
     let (skipped, candidates) = match held {
-        Some(held) => {
+        Some(mut held) => {
             held.skipped.fill(0);
+            let slack = held.slack;
+            if let Some(w) = weights {
+                for ((s, &v), &w) in unweighted_slack.iter_mut().zip(slack).zip(w) {
+                    *s = v / w as f64;
+                }
+                held.slack = &unweighted_slack[..slack.len()];
+            }
             own_label_terms(costs, u, buf, &held, (&mut groups, &mut reach));
             let ChunkHeld {
                 labels,
-                slack,
                 skipped,
                 candidate_words,
                 ..
@@ -350,6 +372,11 @@ fn unary_chunk(
     let mut grouped = GroupedPoints::new();
     grouped.fill(&groups, buf, &reach);
     segment_terms(costs, u, &groups, &grouped, &reach, skipped);
+    if let Some(w) = weights {
+        for (row, &w) in u.chunks_exact_mut(NUM_LABELS).zip(w) {
+            row.iter_mut().for_each(|v| *v *= w as f64);
+        }
+    }
     if let Some((labels, slack, words)) = candidates {
         fill_candidate_words(u, labels, slack, words);
     }
@@ -566,6 +593,7 @@ pub fn settle_unary(
     let UnaryAt {
         model,
         points,
+        weights,
         pose,
         config,
         tau,
@@ -584,7 +612,8 @@ pub fn settle_unary(
             .segments[k];
         let p = points[i];
         let y = e.local(&[p[0] as f64, p[1] as f64, p[2] as f64]);
-        unary[i * NUM_LABELS + k] = pc.cost(e.signed_distance_local(&y));
+        let w = weights.map_or(1.0, |w| w[i] as f64);
+        unary[i * NUM_LABELS + k] = w * pc.cost(e.signed_distance_local(&y));
         skipped[i] &= !(1 << k);
         settled += 1;
     }

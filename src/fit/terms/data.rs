@@ -51,6 +51,8 @@ pub struct PointObjective<'a> {
     // Private: the kept evaluation is valid only for these (see `relabel`).
     model: &'a BodyModel,
     points: &'a [[f32; 3]],
+    /// Per point: the weight its cost is multiplied by (see [`Self::with_weights`]).
+    weights: Option<&'a [f32]>,
     point_cost: PointCost,
     /// The labels of the points (as given to `relabel`).
     labels: Vec<i32>,
@@ -164,6 +166,7 @@ impl<'a> PointObjective<'a> {
         let mut objective = PointObjective {
             model,
             points,
+            weights: None,
             point_cost,
             labels: Vec::new(),
             order: Vec::new(),
@@ -182,6 +185,16 @@ impl<'a> PointObjective<'a> {
         objective
     }
 
+    /// The same objective with each point's cost multiplied by its weight (one per
+    /// point, finite and > 0, checked by the callers): Σ wᵢ·ρ(rᵢ)/σ², for points whose
+    /// depth is known to different precision (see [`crate::fit::DepthNoise`]).
+    pub fn with_weights(mut self, weights: Option<&'a [f32]>) -> Self {
+        debug_assert!(weights.is_none_or(|w| w.len() == self.points.len()));
+        self.weights = weights;
+        self.evaluated = None;
+        self
+    }
+
     /// New labels (and cost settings) for the same points, reusing the buffers: the EM
     /// loop calls this once per M-step instead of building a new objective.
     ///
@@ -197,10 +210,14 @@ impl<'a> PointObjective<'a> {
                 if point_cost.truncation > self.point_cost.truncation {
                     self.evaluated = None;
                 } else if self.evaluated.is_some() {
-                    self.distance
+                    let weights = self.weights;
+                    self.order
                         .par_chunks(CHUNK_POINTS)
+                        .zip(self.distance.par_chunks(CHUNK_POINTS))
                         .zip(self.partial_costs.par_iter_mut())
-                        .for_each(|(dist, cost)| *cost = chunk_cost(dist, &point_cost));
+                        .for_each(|((idx, dist), cost)| {
+                            *cost = chunk_cost(idx, dist, &point_cost, weights)
+                        });
                 }
                 self.point_cost = point_cost;
             }
@@ -266,6 +283,7 @@ impl<'a> PointObjective<'a> {
     /// back to a start, and every other evaluation computes all of its own.
     fn evaluate(&mut self, pose: &Pose, geo: &PoseGeometry) {
         let (points, pc, n) = (self.points, self.point_cost, self.points.len());
+        let weights = self.weights;
         let replaced = &mut self.replaced;
         if self.starting && replaced.pose.as_ref() == Some(pose) {
             // The last M-step ended here: its entries join the start pose's.
@@ -316,7 +334,7 @@ impl<'a> PointObjective<'a> {
                         computed[run].fill(true);
                     }
                 }
-                *cost = chunk_cost(dist, &pc);
+                *cost = chunk_cost(idx, dist, &pc, weights);
             });
         if self.starting {
             if !reuse {
@@ -365,10 +383,18 @@ fn distances_into(
     });
 }
 
-/// Σ cost over one chunk's distances, in order (the kept chunk costs; `relabel`
-/// recomputes them the same way for a new `PointCost`).
-fn chunk_cost(dist: &[f64], pc: &PointCost) -> f64 {
-    dist.iter().map(|&d| pc.cost(d)).sum()
+/// Σ cost over one chunk's distances (of the points `idx`), in order, each times its
+/// point's weight if there are weights (the kept chunk costs; `relabel` recomputes them
+/// the same way for a new `PointCost`).
+fn chunk_cost(idx: &[u32], dist: &[f64], pc: &PointCost, weights: Option<&[f32]>) -> f64 {
+    match weights {
+        None => dist.iter().map(|&d| pc.cost(d)).sum(),
+        Some(w) => idx
+            .iter()
+            .zip(dist)
+            .map(|(&i, &d)| w[i as usize] as f64 * pc.cost(d))
+            .sum(),
+    }
 }
 
 /// The runs of equal segment in `seg` (a chunk of a segment-sorted order): (segment,
@@ -403,7 +429,7 @@ impl PoseObjective for PointObjective<'_> {
         if !self.evaluated_at(pose) {
             self.evaluate(pose, &geo);
         }
-        let (points, pc) = (self.points, self.point_cost);
+        let (points, pc, weights) = (self.points, self.point_cost, self.weights);
         self.chunks
             .par_iter_mut()
             .zip(self.order.par_chunks(CHUNK_POINTS))
@@ -417,9 +443,12 @@ impl PoseObjective for PointObjective<'_> {
                     let (mut qq, mut qr) = (acc.qq[k], acc.qr[k]);
                     for r in run {
                         let d = dist[r];
-                        let (_, w) = pc.cost_and_weight(d);
+                        let (_, mut w) = pc.cost_and_weight(d);
                         if w == 0.0 {
                             continue;
+                        }
+                        if let Some(weights) = weights {
+                            w *= weights[idx[r] as usize] as f64;
                         }
                         let p = vec3(&points[idx[r] as usize]);
                         accumulate_row(&p, &normal[r], d, w, &mut qq, &mut qr);
@@ -525,6 +554,49 @@ mod tests {
                     assert_eq!(h[i * N + j], h[j * N + i]);
                 }
             }
+        }
+    }
+
+    /// With per-point weights the cost is Σ wᵢ·costᵢ (the sum, over groups of points of
+    /// one weight, of weight times the group's unweighted cost) and the gradient
+    /// matches finite differences of it.
+    #[test]
+    fn weighted_cost_and_gradient() {
+        let model = BodyModel::default();
+        let pose = pose_for_tests(2);
+        let (pts, labels) = scattered(&model, &pose, 1200);
+        let group_weight = |g: usize| 0.3 + 0.4 * g as f32;
+        let weights: Vec<f32> = (0..pts.len()).map(|i| group_weight(i % 4)).collect();
+        let pc = PointCost {
+            sigma: 0.03,
+            loss: Loss::Huber(0.03),
+            truncation: 0.4,
+        };
+        let mut obj = PointObjective::new(&model, &pts, &labels, pc).with_weights(Some(&weights));
+        let by_group: f64 = (0..4)
+            .map(|g| {
+                let only: Vec<i32> = (0..pts.len())
+                    .map(|i| if i % 4 == g { labels[i] } else { -1 })
+                    .collect();
+                let c = PointObjective::new(&model, &pts, &only, pc).cost(&pose);
+                group_weight(g) as f64 * c
+            })
+            .sum();
+        let c = obj.cost(&pose);
+        assert!((c - by_group).abs() <= 1e-9 * c, "{c} vs {by_group}");
+        let (mut h, mut g) = ([0.0; NN], [0.0; N]);
+        obj.normal_equations(&pose, &mut h, &mut g);
+        let eps = 1e-6;
+        for dof in 6..N {
+            let (mut a, mut b) = (pose, pose);
+            a[dof] += eps;
+            b[dof] -= eps;
+            let fd = (obj.cost(&a) - obj.cost(&b)) / (2.0 * eps);
+            assert!(
+                (fd - g[dof]).abs() <= 1e-4 * fd.abs().max(g[dof].abs()).max(1.0),
+                "dof {dof}: fd {fd} vs {}",
+                g[dof]
+            );
         }
     }
 
