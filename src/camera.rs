@@ -167,6 +167,7 @@ impl Camera {
         ensure_positive(factor, "factor")?;
         let width = ((self.width as f64) * factor).round().max(1.0) as usize;
         let height = ((self.height as f64) * factor).round().max(1.0) as usize;
+        // A factor so large that the scaled camera is not one is the factor's fault.
         Camera::new(
             self.fx * factor,
             self.fy * factor,
@@ -175,6 +176,7 @@ impl Camera {
             width,
             height,
         )
+        .map_err(|e| Error::invalid("factor", format!("{factor} gives no camera: {e}")))
     }
 
     /// Checks that an image of `height`×`width` belongs to this camera.
@@ -259,5 +261,10 @@ mod tests {
         let r1 = cam.ray(100.5, 60.5);
         let r2 = half.ray(50.0, 30.0);
         assert!((r1 - r2).norm() < 1e-9);
+        // A factor that gives no camera is named, not the camera's fields.
+        for factor in [1e308, 1e10, 0.0, f64::NAN] {
+            let e = cam.scaled(factor).unwrap_err().to_string();
+            assert!(e.starts_with("factor:"), "{e}");
+        }
     }
 }

@@ -269,6 +269,22 @@ APIS: dict[str, Api] = {
         similarity=("str", "ncc"),
         lr_check=("flag", False),
     ),
+    "StereoPoseTracker": api(
+        dp.StereoPoseTracker,
+        camera=("camera", CAM),
+        baseline=("real", 0.12),
+        doffs=("real", 0.0),
+        max_disparity=("int", 16),
+        fattening=("flag", True),
+        disparity_tolerance=("real", 1.0),
+        disparity_sigma=("real", 0.25),
+    ),
+    "StereoPoseTracker.update": api(
+        lambda left, right, mask: dp.StereoPoseTracker(CAM, 0.12).update(left, right, mask),
+        left=("array", IMG),
+        right=("array", np.roll(IMG, -2, 1)),
+        mask=("mask", MASK),
+    ),
     "stereo.depth_from_disparity": api(
         stereo.depth_from_disparity,
         disparity=("array", IMG.astype(np.float32)),

@@ -110,8 +110,21 @@ impl PyCamera {
 
     /// The same camera for an image resampled by `factor`.
     fn scaled(&self, factor: Real) -> PyResult<Self> {
-        let inner = self.inner.scaled(factor.get("factor")?)?;
-        check_focal(&inner)?;
+        let factor = factor.get("factor")?;
+        let inner = self.inner.scaled(factor)?;
+        if check_focal(&inner).is_err() {
+            return Err(invalid(
+                "factor",
+                format!(
+                    "{} scales the focal lengths to {} and {}, outside [{}, {}] pixels",
+                    brief(factor),
+                    brief(inner.fx),
+                    brief(inner.fy),
+                    brief(MIN_FOCAL),
+                    brief(MAX_FOCAL)
+                ),
+            ));
+        }
         Ok(PyCamera { inner })
     }
 
