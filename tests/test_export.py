@@ -8,6 +8,7 @@ import depthpose as dp
 import numpy as np
 import pytest
 from depthpose import export
+from scipy.spatial.transform import Rotation
 
 BodyModel = pytest.importorskip("depthpose.body").BodyModel
 
@@ -70,7 +71,8 @@ def test_bvh_recomposes_segment_rotations(tmp_path):
             vals = motion[f, col : col + nch]
             col += nch
             z, x, y = vals[-3:]
-            local = export._rot("z", z) @ export._rot("x", x) @ export._rot("y", y)
+            # Intrinsic Z-X-Y: Rz(z) @ Rx(x) @ Ry(y), as BVH channels compose.
+            local = Rotation.from_euler("ZXY", [z, x, y], degrees=True).as_matrix()
             world[name] = local if parent is None else world[parent] @ local
             want = flip @ frames[list(model.part_names).index(part[name]), :3, :3] @ flip
             np.testing.assert_allclose(world[name], want, atol=1e-5, err_msg=name)

@@ -42,6 +42,9 @@ __all__ = [
     "_TemplateDatabase",
     "__version__",
     "_default_model_shape",
+    "_euler_zxy",
+    "_rotation_matrix",
+    "_rotation_vector",
     "alpha_beta_swap",
     "alpha_expansion",
     "crf_energy",
@@ -300,6 +303,9 @@ def surface_context(
     """
 
 def _default_model_shape() -> npt.NDArray[np.float64]: ...
+def _rotation_matrix(vector: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+def _rotation_vector(matrix: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
+def _euler_zxy(matrix: npt.ArrayLike) -> tuple[float, float, float]: ...
 
 @final
 class _TemplateDatabase:

@@ -10,7 +10,7 @@ from typing import TYPE_CHECKING, Any, Union, cast
 import numpy as np
 
 from . import _validate
-from ._core import BodyModel, InvalidInputError, InvalidTypeError
+from ._core import BodyModel, InvalidInputError, InvalidTypeError, _euler_zxy
 
 if TYPE_CHECKING:
     import trimesh
@@ -104,27 +104,6 @@ def save_mesh(path: PathLike, model: BodyModel, pose: np.ndarray, *, y_up: bool 
             f.write(files["model.gltf"])
     else:
         mesh.export(path)
-
-
-def _euler_zxy(r: np.ndarray) -> tuple[float, float, float]:
-    """Angles (z, x, y) in degrees with r = Rz(z) @ Rx(x) @ Ry(y)."""
-    x = np.arcsin(np.clip(r[2, 1], -1.0, 1.0))
-    if abs(r[2, 1]) < 1 - 1e-9:
-        z = np.arctan2(-r[0, 1], r[1, 1])
-        y = np.arctan2(-r[2, 0], r[2, 2])
-    else:  # gimbal lock: put everything in z
-        z = np.arctan2(r[1, 0], r[0, 0])
-        y = 0.0
-    return float(np.degrees(z)), float(np.degrees(x)), float(np.degrees(y))
-
-
-def _rot(axis: str, deg: float) -> np.ndarray:
-    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-    if axis == "x":
-        return np.array([[1, 0, 0], [0, c, -s], [0, s, c]])
-    if axis == "y":
-        return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
 
 
 def _end_sites(model: BodyModel, names: list[str]) -> dict[str, np.ndarray]:

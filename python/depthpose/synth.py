@@ -21,7 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from depthpose._core import BodyModel, Camera, FileFormatError, InvalidInputError
+from depthpose._core import (
+    BodyModel,
+    Camera,
+    FileFormatError,
+    InvalidInputError,
+    _rotation_matrix,
+    _rotation_vector,
+)
 
 __all__ = ["MOTIONS", "make_sequence", "save", "load", "motion_pose"]
 
@@ -116,33 +123,6 @@ def motion_pose(motion: str, t: float) -> np.ndarray:
     if motion not in MOTIONS:
         raise InvalidInputError(f"motion: unknown motion {motion!r}; choose from {sorted(MOTIONS)}")
     return MOTIONS[motion](t % 1.0)
-
-
-def _rot_x(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[1, 0, 0], [0, c, -s], [0, s, c]], float)
-
-
-def _rot_y(a: float) -> np.ndarray:
-    c, s = math.cos(a), math.sin(a)
-    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]], float)
-
-
-def _rotvec(r: np.ndarray) -> np.ndarray:
-    """Rotation vector of a rotation matrix, robust near 0 and pi."""
-    angle = math.acos(max(-1.0, min(1.0, (np.trace(r) - 1.0) / 2.0)))
-    if angle < 1e-12:
-        return np.zeros(3)
-    w = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
-    if angle < math.pi - 1e-3:
-        return w * (angle / (2.0 * math.sin(angle)))
-    # Near pi: the axis from the symmetric part, its sign from the skew part.
-    b = (r + np.eye(3)) / 2.0
-    i = int(np.argmax(np.diag(b)))
-    axis = b[:, i] / math.sqrt(max(b[i, i], 1e-300))
-    if axis @ w < 0:
-        axis = -axis
-    return axis / np.linalg.norm(axis) * angle
 
 
 def _check(name: str, value: float, lo: float, hi: float) -> float:
@@ -267,13 +247,14 @@ def make_sequence(
         lean = _SQUAT_LEAN * 0.5 * (1.0 - math.cos(2.0 * math.pi * t)) if motion == "squat" else 0.0
         # Body axes in the world: yaw about the vertical, then lean forward (the
         # body's -z is its front: a positive rotation about body x tips the head forward).
-        r_world = _rot_y(yaw) @ _rot_x(lean)
+        yawed = _rotation_matrix(np.array([0.0, yaw, 0.0]))
+        r_world = yawed @ _rotation_matrix(np.array([lean, 0.0, 0.0]))
         travel = _TRAVEL.get(motion, 0.0) * f / max(frames - 1, 1)
-        forward = _rot_y(yaw) @ np.array([0.0, 0.0, -1.0])
+        forward = yawed @ np.array([0.0, 0.0, -1.0])
         hip_w = np.array([0.0, 0.0, distance]) + travel * forward
         # Put the lower ankle on the floor.
         pose[0:3] = r_cw @ hip_w
-        pose[3:6] = _rotvec(r_cw @ r_world)
+        pose[3:6] = _rotation_vector(r_cw @ r_world)
         j_world = model.joints(pose) @ r_wc.T
         lowest = max(j_world[13, 1], j_world[14, 1])
         hip_w[1] += camera_height - ankle_height - lowest

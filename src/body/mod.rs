@@ -36,6 +36,7 @@
 pub mod ellipsoid;
 pub mod kinematics;
 pub mod residuals;
+pub mod rotation;
 pub mod superquadric;
 
 use crate::error::{Error, Result};

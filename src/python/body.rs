@@ -7,6 +7,7 @@ use super::convert::{
 use super::fit::PyShapeFitResult;
 use super::keywords::keywords;
 use super::{native, native_ok};
+use crate::body::rotation;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{
     pose_from_slice, pose_with_root_increment, BodyModel, BodyShape, Pose, JOINT_NAMES, NUM_JOINTS,
@@ -601,6 +602,54 @@ pub(super) fn check_mesh_bytes(rings: usize, sectors: usize, segments: usize) ->
     check_result_bytes(bytes, "rings/sectors", "the meshes")
 }
 
+/// A (3, 3) rotation matrix argument, finite.
+fn matrix_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<nalgebra::Matrix3<f64>> {
+    let a = f64_array(value, name, Some(2), true)?;
+    if a.shape != [3, 3] {
+        return Err(invalid(
+            name,
+            format!("expected a (3, 3) matrix, got shape {:?}", a.shape),
+        ));
+    }
+    Ok(nalgebra::Matrix3::from_row_slice(&a.data))
+}
+
+/// A (3,) vector argument, finite.
+fn vector_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<nalgebra::Vector3<f64>> {
+    let a = f64_array(value, name, Some(1), true)?;
+    if a.data.len() != 3 {
+        return Err(invalid(
+            name,
+            format!("needs 3 values, got {}", a.data.len()),
+        ));
+    }
+    Ok(nalgebra::Vector3::new(a.data[0], a.data[1], a.data[2]))
+}
+
+/// The (3, 3) rotation matrix of a rotation vector (3,).
+#[pyfunction]
+fn _rotation_matrix<'py>(py: Python<'py>, vector: &Bound<'py, PyAny>) -> PyResult<F64Array<'py>> {
+    let m = rotation::matrix_from_rotation_vector(&vector_arg(vector, "vector")?);
+    to_numpy(py, m.transpose().as_slice().to_vec(), &[3, 3])
+}
+
+/// The rotation vector (3,) of a (3, 3) rotation matrix, accurate near a half turn.
+#[pyfunction]
+fn _rotation_vector<'py>(py: Python<'py>, matrix: &Bound<'py, PyAny>) -> PyResult<F64Array<'py>> {
+    let v = rotation::rotation_vector_from_matrix(&matrix_arg(matrix, "matrix")?);
+    to_numpy(py, v.as_slice().to_vec(), &[3])
+}
+
+/// The Euler angles (z, x, y) in degrees of a (3, 3) rotation matrix, R = Rz·Rx·Ry.
+#[pyfunction]
+fn _euler_zxy(matrix: &Bound<'_, PyAny>) -> PyResult<(f64, f64, f64)> {
+    let [z, x, y] = rotation::euler_zxy_from_matrix(&matrix_arg(matrix, "matrix")?);
+    Ok((z.to_degrees(), x.to_degrees(), y.to_degrees()))
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PyBodyModel>()
+    m.add_class::<PyBodyModel>()?;
+    m.add_function(wrap_pyfunction!(_rotation_matrix, m)?)?;
+    m.add_function(wrap_pyfunction!(_rotation_vector, m)?)?;
+    m.add_function(wrap_pyfunction!(_euler_zxy, m)?)
 }
