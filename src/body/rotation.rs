@@ -33,6 +33,28 @@ pub fn euler_zxy_from_matrix(m: &Matrix3<f64>) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+        /// Any rotation vector of angle below π comes back from its matrix; any Euler
+        /// triple composes back to its matrix.
+        #[test]
+        fn round_trips(
+            ax in -1.0f64..1.0, ay in -1.0f64..1.0, az in -1.0f64..1.0,
+            angle in 0.0f64..3.1,
+            z in -3.1f64..3.1, x in -1.5f64..1.5, y in -3.1f64..3.1,
+        ) {
+            let axis = Vector3::new(ax, ay, az);
+            prop_assume!(axis.norm() > 1e-3);
+            let v = axis.normalize() * angle;
+            let back = rotation_vector_from_matrix(&matrix_from_rotation_vector(&v));
+            prop_assert!((back - v).norm() < 1e-9 * (1.0 + 1.0 / (std::f64::consts::PI - angle)));
+            let m = rz(z) * rx(x) * ry(y);
+            let [z2, x2, y2] = euler_zxy_from_matrix(&m);
+            prop_assert!((rz(z2) * rx(x2) * ry(y2) - m).norm() < 1e-9);
+        }
+    }
 
     fn rz(a: f64) -> Matrix3<f64> {
         matrix_from_rotation_vector(&Vector3::new(0.0, 0.0, a))
