@@ -871,9 +871,11 @@ class PipelineConfig:
         leg out sideways, a crouch, …), one limb at a time, and keeps a limb pose whose
         refitted body explains the depth better. Default True.
     candidate_iterations
-        EM iterations of each brief fit. Default 2.
+        EM iterations of each brief fit, one per hypothesis, started from the hypothesis
+        or from its copy moved onto the observed body, whichever explains the depth
+        better. Default 2.
     finals
-        The best brief fits refined fully. Default 3.
+        The best brief fits refined fully. Default 5.
     final_iterations
         EM iterations of each final (None: ``fit.max_iterations``). Default 10.
     candidate_stride, final_stride

@@ -335,6 +335,13 @@ impl FitProblem {
         Ok(())
     }
 
+    /// `init` moved onto the observed body (see [`start::recentred`]): None when the
+    /// move is negligible or the body is out of view.
+    pub fn recentred(&self, model: &BodyModel, init: &Pose) -> Option<Pose> {
+        let target = self.cloud.centroid()?;
+        start::recentred(model, init, &self.camera, &target)
+    }
+
     /// The fit settings.
     pub fn config(&self) -> &FitConfig {
         &self.config

@@ -21,7 +21,9 @@ pub struct PipelineConfig {
     /// [`super::limbs`] (arms overhead, kicks, …), kept where they explain the depth
     /// better. (A tracked body keeps its limbs: its motion tells them better.)
     pub limb_poses: bool,
-    /// EM iterations of each hypothesis before choosing.
+    /// EM iterations of each hypothesis before choosing: one brief EM per hypothesis,
+    /// from the hypothesis or from its copy moved onto the observed body, whichever
+    /// explains the depth better.
     pub candidate_iterations: usize,
     /// The best this many candidate fits are refined fully, in parallel, and the best of
     /// those kept.
@@ -108,7 +110,7 @@ impl Default for PipelineConfig {
             limb_poses: true,
             any_roll: true,
             candidate_iterations: 2,
-            finals: 3,
+            finals: 5,
             final_iterations: Some(10),
             candidate_stride: 2,
             final_stride: 2,

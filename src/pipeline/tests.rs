@@ -266,3 +266,29 @@ fn the_tracker_learns_the_room_behind_a_walk_across_it() {
     .unwrap();
     assert!(Tracker::new(est, false).background_model().is_none());
 }
+
+/// A hypothesis off to the side of the body is replaced by its copy moved onto the
+/// body, which explains the depth better; the true pose, already on the body, stays.
+#[test]
+fn hypotheses_start_from_their_better_placed_copy() {
+    let (camera, depth, pose) = room_with_body(0.6);
+    let est = estimator(&camera, PipelineConfig::default());
+    let mut frame = est.prepare(&depth, None, None).unwrap();
+    let config = est.config().fit_with(Some(2), 2, Some(false));
+    let mut off = pose;
+    off[0] += 0.25;
+    off[2] += 0.3;
+    let placed = est
+        .better_placed(&mut frame, &config, vec![off, pose])
+        .unwrap();
+    let gap = |p: &Pose| ((p[0] - pose[0]).powi(2) + (p[2] - pose[2]).powi(2)).sqrt();
+    assert!(
+        gap(&placed[0]) < 0.1,
+        "moved to within {} m",
+        gap(&placed[0])
+    );
+    assert_eq!(&placed[0][3..], &off[3..], "only the translation moves");
+    let scores = est.discrepancies(&frame, &[off, placed[0]]).unwrap();
+    assert!(scores[1] < scores[0], "{scores:?}");
+    assert_eq!(placed[1], pose);
+}
