@@ -10,7 +10,7 @@
 //! they decide which points the fit trusts, not how much the data weigh against the
 //! smoothness and the priors (which `sigma` sets).
 
-use crate::error::{ensure, Result};
+use crate::error::{ensure_positive, Result};
 
 /// Depth noise of a triangulating sensor: σ_Z = Z²·δ/(f·B).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -23,16 +23,8 @@ pub struct DepthNoise {
 
 impl DepthNoise {
     pub fn validate(&self) -> Result<()> {
-        ensure(
-            self.focal_baseline.is_finite() && self.focal_baseline > 0.0,
-            "focal_baseline",
-            || format!("must be finite and > 0, got {}", self.focal_baseline),
-        )?;
-        ensure(
-            self.disparity_sigma.is_finite() && self.disparity_sigma > 0.0,
-            "disparity_sigma",
-            || format!("must be finite and > 0, got {}", self.disparity_sigma),
-        )
+        ensure_positive(self.focal_baseline, "focal_baseline")?;
+        ensure_positive(self.disparity_sigma, "disparity_sigma")
     }
 
     /// The depth's standard deviation σ_Z (metres) at depth `z` (metres).

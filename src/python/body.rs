@@ -223,15 +223,7 @@ impl PyBodyModel {
         omega: &Bound<'py, PyAny>,
     ) -> PyResult<F64Array<'py>> {
         let p = pose_arg(pose, "pose")?;
-        let w = f64_array(omega, "omega", Some(1), true)?;
-        if w.data.len() != 3 {
-            return Err(invalid(
-                "omega",
-                format!("needs 3 values, got {}", w.data.len()),
-            ));
-        }
-        let q =
-            pose_with_root_increment(&p, &nalgebra::Vector3::new(w.data[0], w.data[1], w.data[2]));
+        let q = pose_with_root_increment(&p, &vector_arg(omega, "omega")?);
         to_numpy(py, q.to_vec(), &[NUM_PARAMS])
     }
 

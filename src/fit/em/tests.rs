@@ -407,24 +407,32 @@ fn unary_for_labels_skips_only_terms_out_of_reach() {
     };
     unary_costs_for_labels(&model, &points, &pose, &config, tau, held, &mut unary);
     let cap = config.point_cost(tau).cap();
-    let mut n_skipped = 0;
-    for i in 0..n {
-        let own = exact[i * NUM_LABELS + labels[i] as usize];
-        for k in 0..NUM_LABELS {
-            let (got, want) = (unary[i * NUM_LABELS + k], exact[i * NUM_LABELS + k]);
-            if skipped[i] >> k & 1 == 1 {
-                n_skipped += 1;
-                assert!(k != labels[i] as usize && k < NUM_SEGMENTS);
-                assert_eq!(got, cap);
-                assert!(want - own > slack[i], "point {i} segment {k}: {want} {own}");
-            } else {
-                assert!(
-                    (got - want).abs() <= 1e-12 * want.max(1.0),
-                    "{i} {k}: {got} {want}"
-                );
+    // Each row is its point's weight times the exact one; a term is skipped (left at
+    // the weighted cap) only where it is out of the expansion's reach. Returns how many
+    // were skipped.
+    let check = |rows: &[f64], skipped: &[u32], weight: &dyn Fn(usize) -> f64| {
+        let mut n_skipped = 0;
+        for i in 0..n {
+            let w = weight(i);
+            let own = w * exact[i * NUM_LABELS + labels[i] as usize];
+            for k in 0..NUM_LABELS {
+                let (got, want) = (rows[i * NUM_LABELS + k], w * exact[i * NUM_LABELS + k]);
+                if skipped[i] >> k & 1 == 1 {
+                    n_skipped += 1;
+                    assert!(k != labels[i] as usize && k < NUM_SEGMENTS);
+                    assert_eq!(got, w * cap);
+                    assert!(want - own > slack[i], "point {i} segment {k}: {want} {own}");
+                } else {
+                    assert!(
+                        (got - want).abs() <= 1e-12 * want.max(1.0),
+                        "{i} {k}: {got} {want}"
+                    );
+                }
             }
         }
-    }
+        n_skipped
+    };
+    let n_skipped = check(&unary, &skipped, &|_| 1.0);
     assert!(n_skipped > n, "the skipping is exercised: {n_skipped}");
     // With weights: each row is its weight times the unweighted one, a term skipped
     // only where the weighted rows put it out of reach.
@@ -448,24 +456,7 @@ fn unary_for_labels_skips_only_terms_out_of_reach() {
         ..Default::default()
     };
     super::unary::fill_unary(&at, request, &mut weighted);
-    let mut n_weighted_skipped = 0;
-    for i in 0..n {
-        let w = weights[i] as f64;
-        let own = w * exact[i * NUM_LABELS + labels[i] as usize];
-        for k in 0..NUM_LABELS {
-            let (got, want) = (weighted[i * NUM_LABELS + k], w * exact[i * NUM_LABELS + k]);
-            if weighted_skipped[i] >> k & 1 == 1 {
-                n_weighted_skipped += 1;
-                assert_eq!(got, w * cap);
-                assert!(want - own > slack[i], "point {i} segment {k}: {want} {own}");
-            } else {
-                assert!(
-                    (got - want).abs() <= 1e-12 * want.max(1.0),
-                    "{i} {k}: {got} {want}"
-                );
-            }
-        }
-    }
+    let n_weighted_skipped = check(&weighted, &weighted_skipped, &|i| weights[i] as f64);
     assert!(n_weighted_skipped > n, "{n_weighted_skipped}");
     // Points moved to a skipped segment get its exact term back.
     let moved: Vec<i32> = (0..n)
