@@ -13,6 +13,7 @@ SGBM's matching alone, frame by frame.
 Usage::
 
     python scripts/eval_stereo_pose.py [--data DIR] [--json-out F] [--disparity-sigma PX]
+        [--weigh-points] [--config JSON]
 """
 
 from __future__ import annotations
@@ -54,7 +55,13 @@ def sgbm(left: np.ndarray, right: np.ndarray) -> tuple[float, np.ndarray] | None
     return ms, disparity
 
 
-def run(path: Path, mode: str, templates: dp.TemplateDatabase, disparity_sigma: float) -> dict:
+def run(
+    path: Path,
+    mode: str,
+    templates: dp.TemplateDatabase,
+    noise: dict,
+    config: dp.PipelineConfig,
+) -> dict:
     data = np.load(path)
     fx, fy, cx, cy = data["intrinsics"]
     h, w = data["left"].shape[1:]
@@ -66,7 +73,8 @@ def run(path: Path, mode: str, templates: dp.TemplateDatabase, disparity_sigma: 
         float(data["baseline"]),
         background=background,
         templates=templates,
-        disparity_sigma=disparity_sigma,
+        config=config,
+        **noise,
     )
     errors, ms, ratios, kept, raw, peer = [], [], [], [], [], []
     for k in range(len(data["left"])):
@@ -115,10 +123,15 @@ def main() -> None:
     ap.add_argument(
         "--disparity-sigma",
         type=float,
-        default=0.0,
-        help="disparity error (px) the fit weighs points by (default 0: alike)",
+        default=0.25,
+        help="the matcher's disparity error (px): the lost test allows for it (default 0.25)",
     )
+    ap.add_argument(
+        "--weigh-points", action="store_true", help="the fit weighs points by their depth noise"
+    )
+    ap.add_argument("--config", default=None, help="PipelineConfig fields as JSON")
     args = ap.parse_args()
+    config = dp.PipelineConfig(**json.loads(args.config)) if args.config else dp.PipelineConfig()
     paths = sorted(args.data.glob("*.npz"))
     if not paths:
         raise SystemExit(f"no sequences in {args.data}")
@@ -128,7 +141,8 @@ def main() -> None:
     print("|---|---|---|---|---|---|---|")
     for path in paths:
         for mode in MODES:
-            r = run(path, mode, templates, args.disparity_sigma)
+            noise = {"disparity_sigma": args.disparity_sigma, "weigh_points": args.weigh_points}
+            r = run(path, mode, templates, noise, config)
             table.setdefault(path.stem, {})[mode] = r
             mpjpe = "—" if r["mpjpe_mm"] is None else f"{r['mpjpe_mm']:.0f}"
             print(

@@ -278,6 +278,7 @@ APIS: dict[str, Api] = {
         fattening=("flag", True),
         disparity_tolerance=("real", 1.0),
         disparity_sigma=("real", 0.25),
+        weigh_points=("flag", False),
     ),
     "StereoPoseTracker.update": api(
         lambda left, right, mask: dp.StereoPoseTracker(CAM, 0.12).update(left, right, mask),

@@ -176,13 +176,13 @@ def test_fattening_removal_keeps_the_person_and_drops_no_interior_match(pair):
 
 
 def test_weighing_points_by_depth_noise_fits_the_pair_too(pair):
-    """With ``disparity_sigma`` the fit weighs points by their depth noise: a
+    """With ``weigh_points`` the fit weighs points by their depth noise: a
     different fit of the same disparity, the joints but at most one within 10 cm (a
     hand drifts: weighing the far points down is not better here, which is why it is
     off by default)."""
     left, right, _, truth, camera, _ = pair
     alike = dp.StereoPoseEstimator(camera, BASELINE).estimate(left, right)
-    weighed = dp.StereoPoseEstimator(camera, BASELINE, disparity_sigma=0.25)
+    weighed = dp.StereoPoseEstimator(camera, BASELINE, weigh_points=True)
     res = weighed.estimate(left, right)
     assert not np.array_equal(res.pose, alike.pose)
     err = np.linalg.norm(res.joints - truth, axis=1)
@@ -217,6 +217,8 @@ def test_stereo_pose_rejects_bad_arguments(pair):
     for bad in (-0.5, float("nan")):
         with pytest.raises(dp.InvalidInputError, match="disparity_sigma"):
             dp.StereoPoseTracker(camera, BASELINE, disparity_sigma=bad)
+    with pytest.raises(dp.DepthPoseError, match="weigh_points"):
+        dp.StereoPoseTracker(camera, BASELINE, weigh_points="yes")  # type: ignore[arg-type]
     with pytest.raises(dp.DepthPoseError, match="doffs"):
         dp.StereoPoseTracker(camera, BASELINE, doffs=float("inf"))
 

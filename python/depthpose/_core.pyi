@@ -1070,6 +1070,7 @@ class _StereoPose:
         fattening: bool = ...,
         disparity_tolerance: float = ...,
         disparity_sigma: float = ...,
+        weigh_points: bool = ...,
     ) -> _StereoPose: ...
     def update(
         self,

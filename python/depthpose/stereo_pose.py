@@ -12,6 +12,7 @@ the next. The pair of the empty scene is optional.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
@@ -32,9 +33,13 @@ def _baseline(baseline: Any) -> float:
         raise InvalidTypeError(
             f"baseline: expected a number of metres, got {_validate.type_name(baseline)}"
         )
-    if not (np.isfinite(baseline) and baseline > 0):
-        raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
-    return float(baseline)
+    try:
+        value = float(baseline)
+    except OverflowError:
+        value = math.inf
+    if not (math.isfinite(value) and value > 0):
+        raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {value:g}")
+    return value
 
 
 def _pair(background: Any) -> _Pair | None:
@@ -77,10 +82,13 @@ class StereoPoseTracker:
         Disparity error (pixels) the segmentation tolerates on a floor, a wall or
         against the background (default 1).
     disparity_sigma
-        The matched disparity's standard deviation in pixels, for the fit to weigh
-        each point by how precisely its depth is known: 1/(σ² + σ_Z²), σ_Z =
-        Z²·disparity_sigma/(f·B) growing with depth (about 0.25 for this matcher on
-        textured surfaces). Default 0: every point alike.
+        The matched disparity's standard deviation in pixels (default 0.25, this
+        matcher's on textured surfaces): depth noise σ_Z = Z²·disparity_sigma/(f·B)
+        grows with depth, and the tracker's lost test allows for the discrepancy it
+        alone causes. 0: no noise model.
+    weigh_points
+        Weigh each point in the fit by how precisely its depth is known,
+        1/(σ² + σ_Z²) (default False: every point alike).
 
     Raises
     ------
@@ -105,7 +113,8 @@ class StereoPoseTracker:
         max_disparity: int | None = None,
         fattening: bool = True,
         disparity_tolerance: float = 1.0,
-        disparity_sigma: float = 0.0,
+        disparity_sigma: float = 0.25,
+        weigh_points: bool = False,
     ) -> None:
         _check(camera, model, config)
         self._native = _core._StereoPose(
@@ -123,6 +132,7 @@ class StereoPoseTracker:
             fattening=fattening,
             disparity_tolerance=disparity_tolerance,
             disparity_sigma=disparity_sigma,
+            weigh_points=weigh_points,
         )
 
     def update(

@@ -9,6 +9,9 @@
 //! from a real one); the weights are normalised to a mean of 1 over the points, so
 //! they decide which points the fit trusts, not how much the data weigh against the
 //! smoothness and the priors (which `sigma` sets).
+//!
+//! The same noise sets how well even a perfect body can explain the depth: its
+//! [`DepthNoise::discrepancy_floor`] is what a tracker's lost test allows for.
 
 use crate::error::{ensure_positive, Result};
 
@@ -44,6 +47,37 @@ impl DepthNoise {
         let mean = raw.iter().sum::<f64>() / raw.len().max(1) as f64;
         raw.iter().map(|&w| (w / mean) as f32).collect()
     }
+
+    /// The depth discrepancy ([`crate::render::depth_discrepancy`], differences
+    /// capped at `cap` metres) that this noise alone gives a body lying exactly on the
+    /// true surface: the mean over the observed pixels (in `mask`, with a finite
+    /// positive depth) of E[min(|e|, cap)] / cap, e ~ N(0, σ_Z²) at the pixel's depth.
+    /// 0 when no pixel is observed.
+    pub fn discrepancy_floor(&self, depth: &[f32], mask: &[bool], cap: f64) -> f64 {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for (&z, &m) in depth.iter().zip(mask) {
+            if m && z > 0.0 && z.is_finite() {
+                sum += expected_capped_error(self.depth_sigma(z as f64), cap);
+                n += 1;
+            }
+        }
+        if n == 0 {
+            0.0
+        } else {
+            sum / (n as f64 * cap)
+        }
+    }
+}
+
+/// E[min(|e|, c)] for e ~ N(0, σ²): σ·√(2/π)·(1 − exp(−c²/2σ²)) + c·erfc(c/(σ√2)),
+/// the mean of |e| below the cap plus the cap times the chance of reaching it.
+fn expected_capped_error(sigma: f64, cap: f64) -> f64 {
+    if sigma <= 0.0 {
+        return 0.0;
+    }
+    let r = cap / sigma;
+    sigma * (2.0 / std::f64::consts::PI).sqrt() * (1.0 - (-0.5 * r * r).exp())
+        + cap * libm::erfc(r / std::f64::consts::SQRT_2)
 }
 
 #[cfg(test)]
@@ -77,6 +111,58 @@ mod tests {
         assert!((w[0] as f64 / w[2] as f64 - var(4.0) / var(2.0)).abs() < 1e-4);
         assert!(w[0] > w[1] && w[1] > w[2]);
         assert!(n.point_weights(&[], sigma).is_empty());
+    }
+
+    /// E[min(|e|, c)] = ∫₀^c P(|e| > t) dt, by the trapezoid rule on a grid fine
+    /// against σ.
+    fn capped_error_by_quadrature(sigma: f64, cap: f64) -> f64 {
+        let n = (2000.0 * cap / sigma).max(20_000.0) as usize;
+        let tail = |t: f64| libm::erfc(t / (sigma * std::f64::consts::SQRT_2));
+        let h = cap / n as f64;
+        (0..n)
+            .map(|i| 0.5 * h * (tail(i as f64 * h) + tail((i + 1) as f64 * h)))
+            .sum()
+    }
+
+    #[test]
+    fn capped_error_matches_quadrature() {
+        for sigma in [0.001, 0.01, 0.03, 0.1, 0.5] {
+            for cap in [0.05, 0.1, 0.3] {
+                let want = capped_error_by_quadrature(sigma, cap);
+                let got = expected_capped_error(sigma, cap);
+                assert!(
+                    (got - want).abs() < 1e-5 * want,
+                    "σ {sigma}, cap {cap}: {got} vs {want}"
+                );
+            }
+        }
+        // Small noise: the mean absolute error σ·√(2/π); huge noise: the cap.
+        let s = 1e-4;
+        assert!(
+            (expected_capped_error(s, 0.1) - s * (2.0 / std::f64::consts::PI).sqrt()).abs() < 1e-12
+        );
+        assert!((expected_capped_error(1e3, 0.1) - 0.1).abs() < 1e-4);
+        assert_eq!(expected_capped_error(0.0, 0.1), 0.0);
+    }
+
+    #[test]
+    fn discrepancy_floor_averages_the_observed_pixels() {
+        let n = DepthNoise {
+            focal_baseline: 68.4,
+            disparity_sigma: 0.25,
+        };
+        let cap = 0.1;
+        let depth = [2.0f32, 4.0, 3.0, 0.0, f32::NAN];
+        let mask = [true, true, false, true, true];
+        let want = (expected_capped_error(n.depth_sigma(2.0), cap)
+            + expected_capped_error(n.depth_sigma(4.0), cap))
+            / (2.0 * cap);
+        assert!((n.discrepancy_floor(&depth, &mask, cap) - want).abs() < 1e-12);
+        // Farther is noisier.
+        let near = n.discrepancy_floor(&[2.0], &[true], cap);
+        let far = n.discrepancy_floor(&[4.0], &[true], cap);
+        assert!(0.0 < near && near < far && far < 1.0);
+        assert_eq!(n.discrepancy_floor(&depth, &[false; 5], cap), 0.0);
     }
 
     #[test]

@@ -11,9 +11,11 @@
 //!   Z²·δ/(f·B): at 4 m with a 0.12 m baseline and f = 570 px, a quarter of a metre per
 //!   pixel. The segmentation's plane and background tolerances are widened to the depth
 //!   that `disparity_tolerance` pixels span at each depth, so a floor matched within a
-//!   pixel is still recognised as a floor; and the fit weighs each point by how
-//!   precisely its depth is known, for a disparity error of `disparity_sigma` pixels
-//!   ([`crate::fit::noise`]; off by default).
+//!   pixel is still recognised as a floor. For a disparity error of `disparity_sigma`
+//!   pixels ([`crate::fit::noise`]), the tracker's lost test allows for the
+//!   discrepancy the noise alone causes (at 3 m, with f·B = 68 px·m and a quarter
+//!   pixel, about 0.25 where the threshold is 0.5), and with `weigh_points` the fit weighs each point by how precisely its
+//!   depth is known.
 //! - **Video.** The previous frame's matches seed the next frame's growing (on a grid),
 //!   so the person is matched from where it was even where random seeds miss it.
 //!
@@ -64,13 +66,17 @@ pub struct StereoDepthConfig {
     /// In a video, the previous frame's matches seed the next frame's on a grid of this
     /// spacing in pixels (0: no seeds from the previous frame).
     pub seed_spacing: usize,
-    /// The matched disparity's standard deviation (pixels) the fit weighs points by;
-    /// 0 (the default) weighs every point alike. The matcher's subpixel disparities on
-    /// textured surfaces are within about a quarter pixel (RMS) of the truth. The
-    /// weighting is off by default: the body model's own misfit (`sigma`) is of the
-    /// order of the depth noise, and weighing the far side of the body down costs the
-    /// from-scratch search more than it gains (see the benchmark docs).
+    /// The matched disparity's standard deviation (pixels): the matcher's subpixel
+    /// disparities on textured surfaces are within about a quarter pixel (RMS) of the
+    /// truth (the default). The depth noise it implies is what the tracker's lost test
+    /// allows for and, with `weigh_points`, what the fit weighs points by. 0: no noise
+    /// model.
     pub disparity_sigma: f32,
+    /// Weigh each point's data terms by 1/(σ² + σ_Z²) ([`crate::fit::noise`]). Off by
+    /// default: the body model's own misfit (`sigma`) is of the order of the depth
+    /// noise, and weighing the far side of the body down costs the from-scratch search
+    /// more than it gains (see the benchmark docs).
+    pub weigh_points: bool,
 }
 
 impl Default for StereoDepthConfig {
@@ -81,7 +87,8 @@ impl Default for StereoDepthConfig {
             matching,
             disparity_tolerance: 1.0,
             seed_spacing: 8,
-            disparity_sigma: 0.0,
+            disparity_sigma: 0.25,
+            weigh_points: false,
         }
     }
 }
@@ -128,6 +135,18 @@ impl StereoDepth {
     pub fn new(camera: &Camera, rig: StereoRig, config: StereoDepthConfig) -> Result<Self> {
         rig.validate()?;
         config.validate()?;
+        // Depth Z = f·B/d: the noise and tolerances divide by f·B.
+        let focal_baseline = camera.fx * rig.baseline;
+        ensure(
+            focal_baseline.is_normal() && (1.0 / focal_baseline).is_finite(),
+            "baseline",
+            || {
+                format!(
+                    "{} m times the focal length {} px is out of range",
+                    rig.baseline, camera.fx
+                )
+            },
+        )?;
         Ok(StereoDepth {
             camera: *camera,
             rig,
@@ -160,15 +179,21 @@ impl StereoDepth {
         c
     }
 
-    /// `base` weighing points by this rig's depth noise (module docs), unless it has a
-    /// noise model already or `disparity_sigma` is 0.
+    /// This rig's depth noise, for a disparity error of `disparity_sigma` pixels (None
+    /// when that is 0).
+    pub fn depth_noise(&self) -> Option<DepthNoise> {
+        (self.config.disparity_sigma > 0.0).then_some(DepthNoise {
+            focal_baseline: self.camera.fx * self.rig.baseline,
+            disparity_sigma: self.config.disparity_sigma as f64,
+        })
+    }
+
+    /// `base` weighing points by this rig's depth noise (module docs) when
+    /// `weigh_points`, unless it has a noise model already.
     pub fn fit_config(&self, base: &FitConfig) -> FitConfig {
         let mut c = *base;
-        if c.depth_noise.is_none() && self.config.disparity_sigma > 0.0 {
-            c.depth_noise = Some(DepthNoise {
-                focal_baseline: self.camera.fx * self.rig.baseline,
-                disparity_sigma: self.config.disparity_sigma as f64,
-            });
+        if c.depth_noise.is_none() && self.config.weigh_points {
+            c.depth_noise = self.depth_noise();
         }
         c
     }
@@ -285,7 +310,9 @@ impl StereoPipeline {
         }
     }
 
-    pub fn tracking(stereo: StereoDepth, tracker: Tracker) -> Self {
+    /// The tracker's lost test is told the rig's depth noise.
+    pub fn tracking(stereo: StereoDepth, mut tracker: Tracker) -> Self {
+        tracker.set_depth_noise(stereo.depth_noise());
         StereoPipeline {
             stereo,
             stage: Stage::Track(Box::new(tracker)),

@@ -292,3 +292,60 @@ fn hypotheses_start_from_their_better_placed_copy() {
     assert!(scores[1] < scores[0], "{scores:?}");
     assert_eq!(placed[1], pose);
 }
+
+/// `depth` with zero-mean Gaussian noise of `noise`'s σ_Z at each depth (Box–Muller on
+/// a fixed linear congruential generator: deterministic).
+fn with_depth_noise(depth: &[f32], noise: &crate::fit::DepthNoise, mut state: u64) -> Vec<f32> {
+    let mut uniform = move || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+    };
+    depth
+        .iter()
+        .map(|&z| {
+            let normal =
+                (-2.0 * uniform().ln()).sqrt() * (2.0 * std::f64::consts::PI * uniform()).cos();
+            (z as f64 + noise.depth_sigma(z as f64) * normal) as f32
+        })
+        .collect()
+}
+
+#[test]
+fn the_lost_test_allows_for_the_known_depth_noise() {
+    // Stereo-like noise: a tenth of a pixel of disparity with f·B = 0.12·fx, about
+    // 2.6 cm at the body's 3 m, which alone makes the depth discrepancy about 0.2; the
+    // fitted body's is about 0.25, over the threshold of 0.15.
+    let camera = Camera::itop();
+    let noise = crate::fit::DepthNoise {
+        focal_baseline: camera.fx * 0.12,
+        disparity_sigma: 0.1,
+    };
+    let config = PipelineConfig {
+        calibration_frames: 0,
+        lost_discrepancy: 0.15,
+        ..PipelineConfig::default()
+    };
+    let frames: Vec<(Vec<f32>, Pose)> = (0..6)
+        .map(|k| {
+            let (_, depth, pose) = room_with_body(0.3 * k as f64);
+            (with_depth_noise(&depth, &noise, k as u64 + 1), pose)
+        })
+        .collect();
+    let run = |known: Option<crate::fit::DepthNoise>| {
+        let mut tracker = Tracker::new(estimator(&camera, config.clone()), false);
+        tracker.set_depth_noise(known);
+        tracker.start_from(&frames[0].1).unwrap();
+        for (k, (depth, pose)) in frames.iter().enumerate() {
+            let r = crate::pool::on_worker(|| tracker.update(depth, None)).unwrap();
+            let err = mean_joint_error(&r, pose);
+            assert!(err < 0.08, "frame {k}: mean joint error {err}");
+        }
+        tracker.lost_frames
+    };
+    // Unaware of the noise, every frame looks lost and searches; aware of it, none
+    // does.
+    assert_eq!(run(None), frames.len());
+    assert_eq!(run(Some(noise)), 0);
+}

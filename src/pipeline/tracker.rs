@@ -7,7 +7,9 @@
 //! readings with left and right exchanged — whole body, legs only, arms only — among
 //! the starts) and keeps its best. With `recheck_every` set, the search also runs every
 //! that many tracked frames, and the track switches when a hypothesis explains the depth
-//! clearly better.
+//! clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
+//! as the stereo pipeline's) raises the absolute lost threshold by the discrepancy its
+//! noise alone gives a body that fits perfectly.
 //!
 //! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
 //! first frame ([`super::size`]). It then collects usable frames (any but a track's
@@ -21,13 +23,13 @@
 //! outside the person's mask; once it is reliable, the next frames' segmentation uses it
 //! ([`crate::segment::Method::Learned`]). It survives `reset` (the same scene).
 
-use super::estimator::{Estimator, Fitted, Frame};
+use super::estimator::{Estimator, Fitted, Frame, DISCREPANCY_CAP};
 use super::hypotheses::swap_limbs;
 use super::result::{Clock, PoseResult, Source};
 use crate::body::{param, root_rotation, BodyModel, Pose, NUM_SHAPE_FACTORS};
 use crate::error::{Error, Result};
 use crate::fit::start::limbs_swapped;
-use crate::fit::{fit_shape, PosePrior, ShapeConfig, ShapeFrame, ShapeResult};
+use crate::fit::{fit_shape, DepthNoise, PosePrior, ShapeConfig, ShapeFrame, ShapeResult};
 use crate::segment::{BackgroundModel, SegmentHint};
 use nalgebra::Rotation3;
 use std::collections::VecDeque;
@@ -79,6 +81,8 @@ pub struct Tracker {
     pub switches: usize,
     /// The learned background, when it learns one.
     background: Option<BackgroundModel>,
+    /// The depth sensor's noise, when known: the lost test allows for it.
+    depth_noise: Option<DepthNoise>,
 }
 
 impl Tracker {
@@ -103,7 +107,16 @@ impl Tracker {
             lost_frames: 0,
             switches: 0,
             background,
+            depth_noise: None,
         }
+    }
+
+    /// Tells the lost test the depth sensor's noise (None: unknown, taken as none).
+    /// The absolute threshold `lost_discrepancy` then counts above the discrepancy
+    /// ([`DepthNoise::discrepancy_floor`]) that the noise alone gives a body lying on
+    /// the true surface.
+    pub fn set_depth_noise(&mut self, noise: Option<DepthNoise>) {
+        self.depth_noise = noise;
     }
 
     pub fn estimator(&self) -> &Estimator {
@@ -331,8 +344,16 @@ impl Tracker {
 
     fn lost(&self, frame: &Frame, labels: &[i16], score: f64) -> bool {
         let cfg = self.estimator.config();
-        if !self.explains_enough(frame, labels) || score > cfg.lost_discrepancy {
+        if !self.explains_enough(frame, labels) {
             return true;
+        }
+        if score > cfg.lost_discrepancy {
+            let floor = self.depth_noise.map_or(0.0, |n| {
+                n.discrepancy_floor(&frame.depth, &frame.mask, DISCREPANCY_CAP)
+            });
+            if score > cfg.lost_discrepancy + floor {
+                return true;
+            }
         }
         let recent = &self.track.recent;
         if recent.len() >= RECENT_MIN {

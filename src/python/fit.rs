@@ -153,7 +153,7 @@ impl PyFitConfig {
             full_resolution_iterations: self.full_resolution_iterations,
             recentred_start: self.recentred_start,
             swapped_limb_starts: self.swapped_limb_starts,
-            // Set by the stereo pipeline from its rig (`disparity_sigma`).
+            // Set by the stereo pipeline from its rig (`disparity_sigma`, `weigh_points`).
             depth_noise: None,
         };
         cfg.validate()?;

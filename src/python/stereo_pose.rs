@@ -40,6 +40,7 @@ struct StereoArgs {
     fattening: Flag,
     disparity_tolerance: Real,
     disparity_sigma: Real,
+    weigh_points: Flag,
 }
 
 impl StereoArgs {
@@ -55,6 +56,7 @@ impl StereoArgs {
         }
         c.disparity_tolerance = self.disparity_tolerance.get_f32("disparity_tolerance")?;
         c.disparity_sigma = self.disparity_sigma.get_f32("disparity_sigma")?;
+        c.weigh_points = self.weigh_points.get("weigh_points")?;
         Ok(c)
     }
 }
@@ -71,7 +73,7 @@ impl PyStereoPose {
     #[pyo3(signature = (camera, templates, baseline, *, doffs=Real::new(0.0), model=None, config=None,
         background=None, background_depth=None, track=Flag::new(true), calibrate=None, max_disparity=None,
         fattening=Flag::new(true), disparity_tolerance=Real::new(1.0),
-        disparity_sigma=Real::new(0.0)))]
+        disparity_sigma=Real::new(0.25), weigh_points=Flag::new(false)))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
@@ -89,6 +91,7 @@ impl PyStereoPose {
         fattening: Flag,
         disparity_tolerance: Real,
         disparity_sigma: Real,
+        weigh_points: Flag,
     ) -> PyResult<Self> {
         let track = track.get("track")?;
         let calibrate = match &calibrate {
@@ -111,6 +114,7 @@ impl PyStereoPose {
             fattening,
             disparity_tolerance,
             disparity_sigma,
+            weigh_points,
         }
         .config()?;
         let mut stereo = StereoDepth::new(&parts.camera, rig, stereo_config)?;

@@ -93,75 +93,94 @@ pub fn remove_fattening(
 }
 
 /// Whether each pixel is unmatched and in a 4-connected unmatched region of at least
-/// `min_gap` pixels.
+/// `min_gap` pixels. The regions are unions of the rows' unmatched runs (a run joins
+/// those of the row above that share a column), so the work grows with the runs, not
+/// the pixels.
 fn large_gaps(disparity: &[f32], height: usize, width: usize, min_gap: usize) -> Vec<bool> {
+    // The unmatched runs [x0, x1) row by row; row y's are runs[row_start[y]..row_start[y + 1]].
+    let mut runs: Vec<(usize, usize)> = Vec::new();
+    let mut row_start = Vec::with_capacity(height + 1);
     let mut sets = UnionFind::default();
-    let mut id = vec![u32::MAX; disparity.len()];
-    for y in 0..height {
-        for x in 0..width {
-            let k = y * width + x;
-            if !disparity[k].is_nan() {
+    for row in disparity.chunks_exact(width) {
+        row_start.push(runs.len());
+        let mut x = 0;
+        while x < width {
+            if !row[x].is_nan() {
+                x += 1;
                 continue;
             }
-            let left = (x > 0 && id[k - 1] != u32::MAX).then(|| id[k - 1] as usize);
-            let up = (y > 0 && id[k - width] != u32::MAX).then(|| id[k - width] as usize);
-            let set = match (left, up) {
-                (Some(a), Some(b)) => {
-                    sets.union(a, b);
-                    a
-                }
-                (Some(a), None) | (None, Some(a)) => a,
-                (None, None) => sets.push(),
-            };
-            id[k] = set as u32;
+            let x0 = x;
+            while x < width && row[x].is_nan() {
+                x += 1;
+            }
+            runs.push((x0, x));
+            sets.push();
         }
     }
-    let mut size = vec![0usize; sets.len()];
-    let roots: Vec<usize> = id
-        .iter()
-        .map(|&s| {
-            if s == u32::MAX {
-                usize::MAX
-            } else {
-                let r = sets.find(s as usize);
-                size[r] += 1;
-                r
+    row_start.push(runs.len());
+    for y in 1..height {
+        let (mut i, mut j) = (row_start[y - 1], row_start[y]);
+        while i < row_start[y] && j < row_start[y + 1] {
+            let ((a0, a1), (b0, b1)) = (runs[i], runs[j]);
+            if a0 < b1 && b0 < a1 {
+                sets.union(i, j);
             }
-        })
-        .collect();
-    roots
-        .iter()
-        .map(|&r| r != usize::MAX && size[r] >= min_gap)
-        .collect()
+            if a1 < b1 {
+                i += 1;
+            } else {
+                j += 1;
+            }
+        }
+    }
+    let roots: Vec<usize> = (0..runs.len()).map(|k| sets.find(k)).collect();
+    let mut size = vec![0usize; runs.len()];
+    for (&r, &(x0, x1)) in roots.iter().zip(&runs) {
+        size[r] += x1 - x0;
+    }
+    let mut gaps = vec![false; disparity.len()];
+    for y in 0..height {
+        for k in row_start[y]..row_start[y + 1] {
+            if size[roots[k]] >= min_gap {
+                let (x0, x1) = runs[k];
+                gaps[y * width + x0..y * width + x1].fill(true);
+            }
+        }
+    }
+    gaps
 }
 
 /// In place: each value becomes the minimum over the (2·radius + 1)² square around it
-/// (clipped at the image border), by a row pass and a column pass.
+/// (clipped at the image border), by a pass along the rows and one across them; both
+/// work on whole contiguous rows, so they vectorise.
 fn min_filter(values: &mut [f32], height: usize, width: usize, radius: usize) {
-    let mut line = Vec::with_capacity(width.max(height));
-    for row in values.chunks_exact_mut(width) {
-        line.clear();
-        line.extend_from_slice(row);
-        min_line(&line, row, radius);
+    let mut rows = vec![0.0; values.len()];
+    for (src, dst) in values.chunks_exact(width).zip(rows.chunks_exact_mut(width)) {
+        min_line(src, dst, radius);
     }
-    let mut column = vec![0.0; height];
-    for x in 0..width {
-        line.clear();
-        line.extend((0..height).map(|y| values[y * width + x]));
-        min_line(&line, &mut column, radius);
-        for (y, v) in column.iter().enumerate() {
-            values[y * width + x] = *v;
+    for y in 0..height {
+        let (lo, hi) = (y.saturating_sub(radius), (y + radius + 1).min(height));
+        let out = &mut values[y * width..(y + 1) * width];
+        out.copy_from_slice(&rows[lo * width..(lo + 1) * width]);
+        for r in lo + 1..hi {
+            for (o, v) in out.iter_mut().zip(&rows[r * width..(r + 1) * width]) {
+                *o = o.min(*v);
+            }
         }
     }
 }
 
-/// `out[i]` = min of `input[i − radius ..= i + radius]` (clipped). The radius is small,
-/// so the direct loop beats a monotone deque.
+/// `out[i]` = min of `input[i − radius ..= i + radius]` (clipped), as the minimum of
+/// the input shifted by each offset up to `radius` either way.
 fn min_line(input: &[f32], out: &mut [f32], radius: usize) {
     let n = input.len();
-    for (i, o) in out.iter_mut().enumerate() {
-        let (lo, hi) = (i.saturating_sub(radius), (i + radius + 1).min(n));
-        *o = input[lo..hi].iter().copied().fold(f32::INFINITY, f32::min);
+    out.copy_from_slice(input);
+    for s in 1..=radius.min(n.saturating_sub(1)) {
+        for (o, v) in out[..n - s].iter_mut().zip(&input[s..]) {
+            *o = o.min(*v);
+        }
+        for (o, v) in out[s..].iter_mut().zip(&input[..n - s]) {
+            *o = o.min(*v);
+        }
     }
 }
 
@@ -304,6 +323,100 @@ mod tests {
         let removed = remove_fattening(&mut d, h, w, &FatteningConfig::for_window(5)).unwrap();
         assert_eq!(removed, 0);
         assert!(same(&d, &before));
+    }
+
+    /// Brute force of [`large_gaps`]: a flood fill from every unmatched pixel.
+    fn gaps_by_flood_fill(d: &[f32], h: usize, w: usize, min_gap: usize) -> Vec<bool> {
+        let mut region = vec![usize::MAX; d.len()];
+        let mut sizes = Vec::new();
+        for start in 0..d.len() {
+            if !d[start].is_nan() || region[start] != usize::MAX {
+                continue;
+            }
+            let (id, mut stack, mut n) = (sizes.len(), vec![start], 0);
+            region[start] = id;
+            while let Some(k) = stack.pop() {
+                n += 1;
+                let (y, x) = (k / w, k % w);
+                let next = [
+                    (x > 0).then(|| k - 1),
+                    (x + 1 < w).then(|| k + 1),
+                    (y > 0).then(|| k - w),
+                    (y + 1 < h).then(|| k + w),
+                ];
+                for j in next.into_iter().flatten() {
+                    if d[j].is_nan() && region[j] == usize::MAX {
+                        region[j] = id;
+                        stack.push(j);
+                    }
+                }
+            }
+            sizes.push(n);
+        }
+        region
+            .iter()
+            .map(|&r| r != usize::MAX && sizes[r] >= min_gap)
+            .collect()
+    }
+
+    /// Random disparities with about `holes` of the pixels unmatched (a fixed
+    /// linear congruential generator: deterministic).
+    fn random_scene(h: usize, w: usize, holes: f64, mut state: u64) -> Vec<f32> {
+        (0..h * w)
+            .map(|_| {
+                state = state
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                let u = (state >> 11) as f64 / (1u64 << 53) as f64;
+                if u < holes {
+                    f32::NAN
+                } else {
+                    (u * 40.0) as f32
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn large_gaps_match_a_flood_fill() {
+        for (seed, holes) in [(1, 0.3), (2, 0.5), (3, 0.6), (4, 0.9)] {
+            for (h, w) in [(1, 17), (23, 1), (31, 47)] {
+                let d = random_scene(h, w, holes, seed);
+                for min_gap in [1, 2, 5, 20, 200] {
+                    assert_eq!(
+                        large_gaps(&d, h, w, min_gap),
+                        gaps_by_flood_fill(&d, h, w, min_gap),
+                        "seed {seed}, {h}×{w}, min_gap {min_gap}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn random_scenes_match_brute_force() {
+        for (seed, holes) in [(5, 0.2), (6, 0.5), (7, 0.7)] {
+            let (h, w) = (29, 41);
+            let d = random_scene(h, w, holes, seed);
+            for c in [
+                FatteningConfig::for_window(5),
+                FatteningConfig {
+                    radius: 3,
+                    jump: 4.0,
+                    min_gap: 3,
+                },
+                FatteningConfig {
+                    radius: 60,
+                    jump: 1.0,
+                    min_gap: 1,
+                },
+            ] {
+                let want = brute(&d, h, w, &c);
+                let mut got = d.clone();
+                remove_fattening(&mut got, h, w, &c).unwrap();
+                assert!(same(&got, &want), "seed {seed}, {c:?}");
+            }
+        }
     }
 
     #[test]
