@@ -268,6 +268,7 @@ APIS: dict[str, Api] = {
         min_segment=("int", 5),
         similarity=("str", "ncc"),
         lr_check=("flag", False),
+        half_occlusion=("flag", True),
     ),
     "StereoPoseTracker": api(
         dp.StereoPoseTracker,

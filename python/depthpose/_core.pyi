@@ -786,6 +786,7 @@ def stereo_match(
     min_texture: float | None = None,
     min_segment: int | None = None,
     similarity: str | None = None,
+    half_occlusion: bool = ...,
 ) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
 def depth_from_disparity(
     disparity: object, focal: float, baseline: float, doffs: float = ...

@@ -37,6 +37,7 @@ def match(
     fill_gaps: bool = ...,
     min_segment: int | None = ...,
     similarity: str = ...,
+    half_occlusion: bool = ...,
 ) -> NDArray[np.float32]: ...
 
 
@@ -57,6 +58,7 @@ def match(
     fill_gaps: bool = ...,
     min_segment: int | None = ...,
     similarity: str = ...,
+    half_occlusion: bool = ...,
 ) -> _Pair: ...
 
 
@@ -76,6 +78,7 @@ def match(
     fill_gaps: bool = True,
     min_segment: int | None = None,
     similarity: str = "mncc",
+    half_occlusion: bool = True,
 ) -> NDArray[np.float32] | _Pair:
     """Disparity (H, W) float32 of a rectified pair, NaN where unmatched.
 
@@ -88,6 +91,9 @@ def match(
     ``lr_check``: keep only matches confirmed right-to-left (twice the time).
     ``fill_gaps``: fill one-pixel gaps that integer uniqueness leaves on slanted surfaces.
     ``min_segment``: drop matched segments smaller than this many pixels (default 200).
+    ``half_occlusion``: drop the matches a nearer surface spreads into the band on its
+    left that the right camera cannot see (within half a window of a match more than
+    2 px farther on the left).
     A uniform (textureless) pair gives an all-NaN result, not an error.
     """
     disparity, confidence = _core.stereo_match(
@@ -104,6 +110,7 @@ def match(
         fill_gaps=fill_gaps,
         min_segment=min_segment,
         similarity=similarity,
+        half_occlusion=half_occlusion,
     )
     return (disparity, confidence) if return_confidence else disparity
 

@@ -85,7 +85,7 @@ class StereoPoseTracker:
         The matched disparity's standard deviation in pixels (default 0.25, this
         matcher's on textured surfaces): depth noise σ_Z = Z²·disparity_sigma/(f·B)
         grows with depth, and the tracker's lost test allows for the discrepancy it
-        alone causes. 0: no noise model.
+        adds to a good fit's. 0: no noise model.
     weigh_points
         Weigh each point in the fit by how precisely its depth is known,
         1/(σ² + σ_Z²) (default False: every point alike).

@@ -10,8 +10,8 @@
 //! they decide which points the fit trusts, not how much the data weigh against the
 //! smoothness and the priors (which `sigma` sets).
 //!
-//! The same noise sets how well even a perfect body can explain the depth: its
-//! [`DepthNoise::discrepancy_floor`] is what a tracker's lost test allows for.
+//! The same noise makes even a well-fitted body explain the depth less well: its
+//! [`DepthNoise::discrepancy_added`] is what a tracker's lost test allows for.
 
 use crate::error::{ensure_positive, Result};
 
@@ -48,16 +48,21 @@ impl DepthNoise {
         raw.iter().map(|&w| (w / mean) as f32).collect()
     }
 
-    /// The depth discrepancy ([`crate::render::depth_discrepancy`], differences
-    /// capped at `cap` metres) that this noise alone gives a body lying exactly on the
-    /// true surface: the mean over the observed pixels (in `mask`, with a finite
-    /// positive depth) of E[min(|e|, cap)] / cap, e ~ N(0, σ_Z²) at the pixel's depth.
-    /// 0 when no pixel is observed.
-    pub fn discrepancy_floor(&self, depth: &[f32], mask: &[bool], cap: f64) -> f64 {
+    /// How much this noise raises the depth discrepancy
+    /// ([`crate::render::depth_discrepancy`], differences capped at `cap` metres) of a
+    /// body that fits as well as the model can, its own residuals of scale `sigma`
+    /// (metres; the fit's [`crate::fit::EmConfig::sigma`]): the mean over the observed
+    /// pixels (in `mask`, with a finite positive depth) of
+    /// (E[min(|r|, cap)] − E[min(|m|, cap)]) / cap, with m ~ N(0, σ²) the model's
+    /// residual and r ~ N(0, σ² + σ_Z²) the residual with the noise added. 0 when no
+    /// pixel is observed.
+    pub fn discrepancy_added(&self, depth: &[f32], mask: &[bool], sigma: f64, cap: f64) -> f64 {
+        let model = expected_capped_error(sigma, cap);
         let (mut sum, mut n) = (0.0, 0usize);
         for (&z, &m) in depth.iter().zip(mask) {
             if m && z > 0.0 && z.is_finite() {
-                sum += expected_capped_error(self.depth_sigma(z as f64), cap);
+                let noise = self.depth_sigma(z as f64);
+                sum += expected_capped_error(sigma.hypot(noise), cap) - model;
                 n += 1;
             }
         }
@@ -146,23 +151,30 @@ mod tests {
     }
 
     #[test]
-    fn discrepancy_floor_averages_the_observed_pixels() {
+    fn discrepancy_added_averages_the_observed_pixels() {
         let n = DepthNoise {
             focal_baseline: 68.4,
             disparity_sigma: 0.25,
         };
-        let cap = 0.1;
+        let (sigma, cap) = (0.02, 0.1);
         let depth = [2.0f32, 4.0, 3.0, 0.0, f32::NAN];
         let mask = [true, true, false, true, true];
-        let want = (expected_capped_error(n.depth_sigma(2.0), cap)
-            + expected_capped_error(n.depth_sigma(4.0), cap))
-            / (2.0 * cap);
-        assert!((n.discrepancy_floor(&depth, &mask, cap) - want).abs() < 1e-12);
-        // Farther is noisier.
-        let near = n.discrepancy_floor(&[2.0], &[true], cap);
-        let far = n.discrepancy_floor(&[4.0], &[true], cap);
+        let added = |z: f64| {
+            expected_capped_error((sigma * sigma + n.depth_sigma(z).powi(2)).sqrt(), cap)
+                - expected_capped_error(sigma, cap)
+        };
+        let want = (added(2.0) + added(4.0)) / (2.0 * cap);
+        let got = n.discrepancy_added(&depth, &mask, sigma, cap);
+        assert!((got - want).abs() < 1e-12);
+        // Farther is noisier; a model that already misses by more gains less.
+        let near = n.discrepancy_added(&[2.0], &[true], sigma, cap);
+        let far = n.discrepancy_added(&[4.0], &[true], sigma, cap);
         assert!(0.0 < near && near < far && far < 1.0);
-        assert_eq!(n.discrepancy_floor(&depth, &[false; 5], cap), 0.0);
+        assert!(n.discrepancy_added(&[4.0], &[true], 0.05, cap) < far);
+        // With a perfect model it is the noise's own discrepancy.
+        let alone = n.discrepancy_added(&[3.0], &[true], 0.0, cap);
+        assert!((alone - expected_capped_error(n.depth_sigma(3.0), cap) / cap).abs() < 1e-12);
+        assert_eq!(n.discrepancy_added(&depth, &[false; 5], sigma, cap), 0.0);
     }
 
     #[test]

@@ -8,8 +8,8 @@
 //! the starts) and keeps its best. With `recheck_every` set, the search also runs every
 //! that many tracked frames, and the track switches when a hypothesis explains the depth
 //! clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
-//! as the stereo pipeline's) raises the absolute lost threshold by the discrepancy its
-//! noise alone gives a body that fits perfectly.
+//! as the stereo pipeline's) raises the absolute lost threshold by as much as its noise
+//! raises the discrepancy of a body that fits as well as the model can.
 //!
 //! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
 //! first frame ([`super::size`]). It then collects usable frames (any but a track's
@@ -112,9 +112,9 @@ impl Tracker {
     }
 
     /// Tells the lost test the depth sensor's noise (None: unknown, taken as none).
-    /// The absolute threshold `lost_discrepancy` then counts above the discrepancy
-    /// ([`DepthNoise::discrepancy_floor`]) that the noise alone gives a body lying on
-    /// the true surface.
+    /// The absolute threshold `lost_discrepancy` then rises by as much as the noise
+    /// raises the discrepancy of a body whose own residuals have the fit's scale
+    /// ([`DepthNoise::discrepancy_added`]).
     pub fn set_depth_noise(&mut self, noise: Option<DepthNoise>) {
         self.depth_noise = noise;
     }
@@ -348,10 +348,11 @@ impl Tracker {
             return true;
         }
         if score > cfg.lost_discrepancy {
-            let floor = self.depth_noise.map_or(0.0, |n| {
-                n.discrepancy_floor(&frame.depth, &frame.mask, DISCREPANCY_CAP)
+            let sigma = cfg.fit.em.sigma;
+            let added = self.depth_noise.map_or(0.0, |n| {
+                n.discrepancy_added(&frame.depth, &frame.mask, sigma, DISCREPANCY_CAP)
             });
-            if score > cfg.lost_discrepancy + floor {
+            if score > cfg.lost_discrepancy + added {
                 return true;
             }
         }

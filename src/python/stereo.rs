@@ -94,7 +94,7 @@ fn seeds_of(obj: &Bound<PyAny>) -> PyResult<Vec<Seed>> {
 #[pyo3(signature = (left, right, max_disparity=None, window=Int::new(5), threshold=None, num_seeds=None,
     seeds=None, seed=Int::new(0), lr_check=Flag::new(false), subpixel=Flag::new(true),
     fill_gaps=Flag::new(true), seed_distinctness=None, min_texture=None, min_segment=None,
-    similarity=None))]
+    similarity=None, half_occlusion=Flag::new(true)))]
 #[allow(clippy::too_many_arguments)]
 fn stereo_match<'py>(
     py: Python<'py>,
@@ -113,6 +113,7 @@ fn stereo_match<'py>(
     min_texture: Option<Real>,
     min_segment: Option<Int>,
     similarity: Option<Text>,
+    half_occlusion: Flag,
 ) -> PyResult<(F32Array<'py>, F32Array<'py>)> {
     let d = StereoConfig::default();
     let real = |v: Option<Real>, default: f32, name: &str| -> PyResult<f32> {
@@ -135,6 +136,7 @@ fn stereo_match<'py>(
         subpixel: subpixel.get("subpixel")?,
         fill_gaps: fill_gaps.get("fill_gaps")?,
         min_segment: count(min_segment, "min_segment")?.unwrap_or(d.min_segment),
+        half_occlusion: half_occlusion.get("half_occlusion")?,
         rng_seed: seed.seed("seed")?,
     };
     let l = gray_image(left, "left")?;

@@ -10,12 +10,15 @@
 //! from the seeds with a priority queue and the uniqueness constraint, testing only
 //! d − 1, d, d + 1 for each 4-neighbour, (4) optional left–right check, (5) subpixel
 //! refinement by a parabola through the correlations at d − 1, d, d + 1, (6) optional
-//! removal of small disparity segments. Memory is O(W·H), never O(W·H·D). [`fattening`]
-//! removes the band of background pixels a nearer surface's disparity spreads to.
+//! removal of small disparity segments, (7) optional removal of the matches a nearer
+//! surface spreads into the half-occluded band on its left ([`occlusion`]). Memory is
+//! O(W·H), never O(W·H·D). [`fattening`] removes the band of background pixels a nearer
+//! surface's disparity spreads to against an unmatched background.
 
 mod correlation;
 pub mod fattening;
 mod grow;
+pub mod occlusion;
 
 pub use correlation::Similarity;
 
@@ -41,6 +44,11 @@ pub const LR_TOLERANCE: f32 = 1.0;
 /// Largest disparity step (px) between 4-neighbours of one segment in the small-segment
 /// filter.
 pub const SEGMENT_STEP: i32 = 1;
+
+/// A match is in a nearer surface's half-occluded band ([`occlusion`]) when a match
+/// within half a window to its left is farther by more than this (px): the error the
+/// band's matches would have.
+pub const OCCLUSION_JUMP: f32 = 2.0;
 
 /// Settings of [`match_stereo`].
 #[derive(Debug, Clone, PartialEq)]
@@ -77,6 +85,9 @@ pub struct StereoConfig {
     /// Matched segments (4-connected, disparity steps ≤ 1) smaller than this many
     /// pixels are removed; 0 keeps everything.
     pub min_segment: usize,
+    /// Remove the matches a nearer surface's windows spread into the half-occluded band
+    /// left of it, which has no true match ([`occlusion`], [`OCCLUSION_JUMP`]).
+    pub half_occlusion: bool,
     /// Seed of the random generator that draws seed pixels (runs are deterministic).
     pub rng_seed: u64,
 }
@@ -95,6 +106,7 @@ impl Default for StereoConfig {
             subpixel: true,
             fill_gaps: true,
             min_segment: 200,
+            half_occlusion: true,
             rng_seed: 0,
         }
     }
@@ -380,6 +392,15 @@ fn match_padded(
             }
         });
     Grower::recycle(growers);
+    if config.half_occlusion {
+        occlusion::remove_half_occluded(
+            &mut disparity,
+            &mut confidence,
+            width,
+            half,
+            OCCLUSION_JUMP,
+        );
+    }
     Ok(StereoResult {
         disparity,
         confidence,
