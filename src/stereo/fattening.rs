@@ -187,6 +187,7 @@ fn min_line(input: &[f32], out: &mut [f32], radius: usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stereo::testing::{random_disparities, same};
 
     /// A person-like block of disparity 20 in front of a wall of disparity 10, with the
     /// wall's pixels next to the block given the block's disparity (fattening).
@@ -230,12 +231,6 @@ mod tests {
             }
         }
         out
-    }
-
-    fn same(a: &[f32], b: &[f32]) -> bool {
-        a.iter()
-            .zip(b)
-            .all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
     }
 
     #[test]
@@ -359,29 +354,11 @@ mod tests {
             .collect()
     }
 
-    /// Random disparities with about `holes` of the pixels unmatched (a fixed
-    /// linear congruential generator: deterministic).
-    fn random_scene(h: usize, w: usize, holes: f64, mut state: u64) -> Vec<f32> {
-        (0..h * w)
-            .map(|_| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let u = (state >> 11) as f64 / (1u64 << 53) as f64;
-                if u < holes {
-                    f32::NAN
-                } else {
-                    (u * 40.0) as f32
-                }
-            })
-            .collect()
-    }
-
     #[test]
     fn large_gaps_match_a_flood_fill() {
         for (seed, holes) in [(1, 0.3), (2, 0.5), (3, 0.6), (4, 0.9)] {
             for (h, w) in [(1, 17), (23, 1), (31, 47)] {
-                let d = random_scene(h, w, holes, seed);
+                let d = random_disparities(h * w, holes, 40.0, seed);
                 for min_gap in [1, 2, 5, 20, 200] {
                     assert_eq!(
                         large_gaps(&d, h, w, min_gap),
@@ -397,7 +374,7 @@ mod tests {
     fn random_scenes_match_brute_force() {
         for (seed, holes) in [(5, 0.2), (6, 0.5), (7, 0.7)] {
             let (h, w) = (29, 41);
-            let d = random_scene(h, w, holes, seed);
+            let d = random_disparities(h * w, holes, 40.0, seed);
             for c in [
                 FatteningConfig::for_window(5),
                 FatteningConfig {

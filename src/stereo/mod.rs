@@ -604,4 +604,6 @@ pub fn depth_from_disparity(
 }
 
 #[cfg(test)]
+mod testing;
+#[cfg(test)]
 mod tests;

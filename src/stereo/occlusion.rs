@@ -63,6 +63,7 @@ pub fn remove_half_occluded(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stereo::testing::{random_disparities, same};
 
     /// Brute force: walks left from each match to find, for each of the `reach`
     /// pixels on its left, the disparity of the nearest match at or left of it.
@@ -84,12 +85,6 @@ mod tests {
             }
         }
         out
-    }
-
-    fn same(a: &[f32], b: &[f32]) -> bool {
-        a.iter()
-            .zip(b)
-            .all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
     }
 
     #[test]
@@ -123,24 +118,9 @@ mod tests {
 
     #[test]
     fn matches_brute_force_on_random_rows() {
-        let mut state = 7u64;
-        let mut next = move || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
         let (h, w) = (30, 53);
-        for holes in [0.1, 0.4, 0.8] {
-            let d: Vec<f32> = (0..h * w)
-                .map(|_| {
-                    if next() < holes {
-                        f32::NAN
-                    } else {
-                        (next() * 30.0) as f32
-                    }
-                })
-                .collect();
+        for (seed, holes) in [(7, 0.1), (8, 0.4), (9, 0.8)] {
+            let d = random_disparities(h * w, holes, 30.0, seed);
             for (reach, jump) in [(1, 0.5), (2, 2.0), (4, 5.0), (60, 1.0)] {
                 let want = brute(&d, w, reach, jump);
                 let mut got = d.clone();
