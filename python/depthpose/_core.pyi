@@ -892,7 +892,8 @@ class PipelineConfig:
         Default 0.75.
     lost_ratio, lost_discrepancy
         Tracking: ... or its depth discrepancy exceeds this times the recent median, or
-        this value. Default 1.6 and 0.5.
+        this value (raised by what a stereo rig's depth noise adds). Default 1.6 and
+        0.5.
     recheck_every
         Tracking: the template search also runs every this many frames, not only when
         the track is lost (0 = only when lost). Default 0.

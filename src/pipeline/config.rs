@@ -49,8 +49,8 @@ pub struct PipelineConfig {
     /// ... or its depth discrepancy exceeds this many times the running median of the
     /// track's recent ones, ...
     pub lost_ratio: f64,
-    /// ... or this absolute value (above what the sensor's noise alone causes, when
-    /// the tracker knows it: see [`super::Tracker::set_depth_noise`]).
+    /// ... or this absolute value (raised by what the sensor's noise adds, when the
+    /// tracker knows it: see [`super::Tracker::set_depth_noise`]).
     pub lost_discrepancy: f64,
     /// Tracking: every this many frames the template search runs again and the track
     /// switches when a hypothesis explains the depth clearly better (0 = never: the
