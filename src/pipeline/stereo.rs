@@ -237,18 +237,21 @@ impl StereoDepth {
             ..self.config.matching.clone()
         };
         let matched = match_stereo_seeded(left, right, h, w, &matching, &seeds)?;
-        let mut disparity = matched.disparity.clone();
+        let occluded = if self.config.matching.half_occlusion {
+            let (mut occluded, mut confidence) = (matched.disparity.clone(), matched.confidence);
+            let reach = self.config.matching.window / 2;
+            remove_half_occluded(&mut occluded, &mut confidence, w, reach, OCCLUSION_JUMP);
+            Some(occluded)
+        } else {
+            None
+        };
+        let mut disparity = matched.disparity;
         if let Some(f) = &self.config.fattening {
             remove_fattening(&mut disparity, h, w, f)?;
         }
-        if self.config.matching.half_occlusion {
-            let (mut occluded, mut confidence) = (matched.disparity, matched.confidence);
-            let reach = self.config.matching.window / 2;
-            remove_half_occluded(&mut occluded, &mut confidence, w, reach, OCCLUSION_JUMP);
-            for (d, o) in disparity.iter_mut().zip(&occluded) {
-                if o.is_nan() {
-                    *d = f32::NAN;
-                }
+        for (d, o) in disparity.iter_mut().zip(occluded.iter().flatten()) {
+            if o.is_nan() {
+                *d = f32::NAN;
             }
         }
         let depth = depth_from_disparity(
