@@ -12,7 +12,6 @@ the next. The pair of the empty scene is optional.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import numpy as np
@@ -25,21 +24,6 @@ from .pipeline import _check, _native_templates
 __all__ = ["StereoPoseEstimator", "StereoPoseTracker", "estimate_stereo"]
 
 _Pair = tuple[np.ndarray, np.ndarray]
-
-
-def _baseline(baseline: Any) -> float:
-    number = isinstance(baseline, (int, float, np.integer, np.floating))
-    if isinstance(baseline, bool) or not number:
-        raise InvalidTypeError(
-            f"baseline: expected a number of metres, got {_validate.type_name(baseline)}"
-        )
-    try:
-        value = float(baseline)
-    except OverflowError:
-        value = math.inf
-    if not (math.isfinite(value) and value > 0):
-        raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {value:g}")
-    return value
 
 
 def _pair(background: Any) -> _Pair | None:
@@ -120,7 +104,7 @@ class StereoPoseTracker:
         self._native = _core._StereoPose(
             camera,
             _native_templates(templates),
-            _baseline(baseline),
+            _validate.number(baseline, "baseline", low=0.0, low_open=True),
             doffs=doffs,
             model=model,
             config=config,

@@ -33,10 +33,8 @@ use crate::error::{ensure, ensure_positive, Error, Result};
 use crate::fit::{DepthNoise, FitConfig};
 use crate::segment::SegmentConfig;
 use crate::stereo::fattening::{remove_fattening, FatteningConfig};
-use crate::stereo::occlusion::remove_half_occluded;
-use crate::stereo::{
-    depth_from_disparity, match_stereo_seeded, Seed, StereoConfig, OCCLUSION_JUMP,
-};
+use crate::stereo::occlusion::remove_half_occluded_for_window;
+use crate::stereo::{depth_from_disparity, match_stereo_seeded, Seed, StereoConfig};
 use std::time::Instant;
 
 /// A rectified stereo rig whose left camera is the pipeline's camera.
@@ -239,8 +237,8 @@ impl StereoDepth {
         let matched = match_stereo_seeded(left, right, h, w, &matching, &seeds)?;
         let occluded = if self.config.matching.half_occlusion {
             let (mut occluded, mut confidence) = (matched.disparity.clone(), matched.confidence);
-            let reach = self.config.matching.window / 2;
-            remove_half_occluded(&mut occluded, &mut confidence, w, reach, OCCLUSION_JUMP);
+            let window = self.config.matching.window;
+            remove_half_occluded_for_window(&mut occluded, &mut confidence, w, window);
             Some(occluded)
         } else {
             None
@@ -481,7 +479,8 @@ mod tests {
         let f = config.fattening.unwrap();
         remove_fattening(&mut fattening, h, w, &f).unwrap();
         let (mut occluded, mut confidence) = (raw.disparity.clone(), raw.confidence.clone());
-        let removed = remove_half_occluded(&mut occluded, &mut confidence, w, 2, OCCLUSION_JUMP);
+        let window = config.matching.window;
+        let removed = remove_half_occluded_for_window(&mut occluded, &mut confidence, w, window);
         assert!(
             removed > 0,
             "the block's left edge has a half-occluded band"

@@ -393,12 +393,11 @@ fn match_padded(
         });
     Grower::recycle(growers);
     if config.half_occlusion {
-        occlusion::remove_half_occluded(
+        occlusion::remove_half_occluded_for_window(
             &mut disparity,
             &mut confidence,
             width,
-            half,
-            OCCLUSION_JUMP,
+            config.window,
         );
     }
     Ok(StereoResult {

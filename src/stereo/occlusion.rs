@@ -10,7 +10,20 @@
 //! unmatched pixel counts as the nearest match left of it (the surface the gap belongs
 //! to). Right edges have no half-occlusion in the left image and are left alone.
 
+use super::OCCLUSION_JUMP;
 use rayon::prelude::*;
+
+/// [`remove_half_occluded`] with the matcher's settings for a correlation window of
+/// side `window`: a window reaches half its side across an edge, and a match is
+/// dropped beside one more than [`OCCLUSION_JUMP`] pixels farther.
+pub fn remove_half_occluded_for_window(
+    disparity: &mut [f32],
+    confidence: &mut [f32],
+    width: usize,
+    window: usize,
+) -> usize {
+    remove_half_occluded(disparity, confidence, width, window / 2, OCCLUSION_JUMP)
+}
 
 /// Sets to NaN every match of `disparity` (row-major, rows of `width`, NaN unmatched)
 /// in the half-occluded band of a nearer surface (module docs), and the same pixels of
