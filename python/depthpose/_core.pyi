@@ -866,6 +866,13 @@ class PipelineConfig:
         left/right-swapped and mirrored-view hypotheses). Default 4.
     hypotheses
         Hypotheses, ranked by depth discrepancy, refined by brief EM fits. Default 20.
+    back_views
+        Each template hypothesis is also tried turned around (seen from behind).
+        Default True.
+    any_roll
+        The search also looks at the frame rotated about the optical axis: the views
+        that turn a leaning or lying body upright, head up and head down, and, for a
+        body explained badly, every eighth of a turn. Default True.
     limb_poses
         From scratch (``estimate`` and a track's first frame), the search's best fit
         also tries each limb in a wider set of poses (arms overhead or in a V, kicks, a
@@ -893,7 +900,9 @@ class PipelineConfig:
     lost_ratio, lost_discrepancy
         Tracking: ... or its depth discrepancy exceeds this times the recent median, or
         this value (raised by what a stereo rig's depth noise adds). Default 1.6 and
-        0.5.
+        0.5. A search whose best body explains the depth worse than
+        ``lost_discrepancy`` (from scratch, or on a lost frame) also runs on the frame
+        seen at every eighth of a turn about the optical axis (with ``any_roll``).
     recheck_every
         Tracking: the template search also runs every this many frames, not only when
         the track is lost (0 = only when lost). Default 0.

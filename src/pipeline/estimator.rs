@@ -6,7 +6,7 @@ use super::confidence::joint_confidence;
 use super::config::PipelineConfig;
 use super::hypotheses::{rest_pose_penalty, template_starts};
 use super::orientation::{
-    long_axis_tilt, rotate_about_optical_axis, rotated_view, search_rotations,
+    every_roll, long_axis_tilt, rotate_about_optical_axis, rotated_view, search_rotations,
 };
 use super::resolution::WorkingResolution;
 use super::result::{Clock, PoseResult, SegmentSummary, Source};
@@ -268,23 +268,37 @@ impl Estimator {
         rest_pose_penalty(pose, self.config.pose_prior_weight)
     }
 
-    /// Start poses from the template search (see [`template_starts`]): on the frame as
-    /// it is when the person is about upright, else on a view rotated to make it so
-    /// ([`super::orientation`]), and, with `any_roll`, also upside down.
-    pub(crate) fn template_hypotheses(&self, frame: &Frame) -> Result<Vec<Pose>> {
+    /// The views the template search looks at first: the frame as it is, and, with
+    /// `any_roll`, the views that turn a leaning or lying body upright, head up and
+    /// head down ([`search_rotations`]). Rolls in radians.
+    pub(crate) fn first_rolls(&self, frame: &Frame) -> Vec<f64> {
+        if self.config.any_roll {
+            search_rotations(long_axis_tilt(
+                &frame.depth,
+                &frame.mask,
+                &self.resolution.working,
+            ))
+        } else {
+            vec![0.0]
+        }
+    }
+
+    /// Start poses from the template search (see [`template_starts`]) on the frame seen
+    /// rolled by each of `rotations` (radians; 0 is the frame as it is), the candidates
+    /// rolled back.
+    pub(crate) fn template_hypotheses(
+        &self,
+        frame: &Frame,
+        rotations: &[f64],
+    ) -> Result<Vec<Pose>> {
         let camera = &self.resolution.working;
         let config = MatchConfig {
             top_k: self.config.candidates,
             shortlist: SHORTLIST.max(self.config.candidates),
             ..MatchConfig::default()
         };
-        let rotations = if self.config.any_roll {
-            search_rotations(long_axis_tilt(&frame.depth, &frame.mask, camera))
-        } else {
-            vec![0.0]
-        };
         let mut candidates = Vec::new();
-        for roll in rotations {
+        for &roll in rotations {
             if roll == 0.0 {
                 let view = DepthView::new(&frame.depth, camera.height, camera.width, "depth")?;
                 let found =
@@ -319,11 +333,8 @@ impl Estimator {
         ))
     }
 
-    /// The best fit from the template hypotheses (and `extra` start poses, always
-    /// refined): the best `hypotheses` by their depth discrepancy refined briefly by EM,
-    /// the `finals` explaining the depth best refined fully (their EM continued), the
-    /// best of all kept. Returns the fit and its discrepancy. The fit has its EM's
-    /// labels only ([`Self::label_all`] completes it).
+    /// The best fit from the template hypotheses (see [`Self::search_views`]) on the
+    /// first views ([`Self::first_rolls`]).
     pub(crate) fn search(
         &self,
         frame: &mut Frame,
@@ -331,8 +342,39 @@ impl Estimator {
         hypotheses: usize,
         clock: Option<&mut Clock>,
     ) -> Result<(FitResult, f64)> {
+        let rolls = self.first_rolls(frame);
+        self.search_views(frame, extra, hypotheses, &rolls, clock)
+    }
+
+    /// The views of the wide search, for a body the first views misread (upside down,
+    /// doubled up, lying): every eighth of a turn ([`every_roll`]) not among the first
+    /// views. Empty without `any_roll`.
+    pub(crate) fn wide_rolls(&self, frame: &Frame) -> Vec<f64> {
+        if !self.config.any_roll {
+            return Vec::new();
+        }
+        let first = self.first_rolls(frame);
+        every_roll()
+            .into_iter()
+            .filter(|r| !first.iter().any(|f| (f - r).abs() < 1e-9))
+            .collect()
+    }
+
+    /// The best fit from the template hypotheses on the views rolled by `rotations`
+    /// (and `extra` start poses, always refined): the best `hypotheses` by their depth
+    /// discrepancy refined briefly by EM, the `finals` explaining the depth best refined
+    /// fully (their EM continued), the best of all kept. Returns the fit and its
+    /// discrepancy. The fit has its EM's labels only ([`Self::label_all`] completes it).
+    pub(crate) fn search_views(
+        &self,
+        frame: &mut Frame,
+        extra: &[Pose],
+        hypotheses: usize,
+        rotations: &[f64],
+        clock: Option<&mut Clock>,
+    ) -> Result<(FitResult, f64)> {
         let cfg = &self.config;
-        let mut starts = self.template_hypotheses(frame)?;
+        let mut starts = self.template_hypotheses(frame, rotations)?;
         if let Some(clock) = clock {
             clock.lap("templates");
         }

@@ -65,6 +65,21 @@ pub fn search_rotations(tilt: Option<f64>) -> Vec<f64> {
     }
 }
 
+/// The rolls of the wide search, radians in (−π, π]: every eighth of a turn, so that
+/// a body at any roll is within 22.5° of upright in one of the views.
+pub fn every_roll() -> Vec<f64> {
+    (0..8)
+        .map(|k| {
+            let r = k as f64 * PI / 4.0;
+            if r > PI + 1e-9 {
+                r - 2.0 * PI
+            } else {
+                r
+            }
+        })
+        .collect()
+}
+
 /// The largest side of a rotated view (pixels).
 const MAX_VIEW_SIDE: usize = 4096;
 
@@ -201,6 +216,17 @@ mod tests {
         let back = rotate_about_optical_axis(&upright, roll);
         for (a, b) in model.joints(&back).iter().zip(&model.joints(&rolled)) {
             assert!((a - b).norm() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn the_wide_search_sees_every_eighth_of_a_turn_once() {
+        let r = every_roll();
+        assert_eq!(r.len(), 8);
+        for (k, v) in r.iter().enumerate() {
+            assert!(*v > -PI && *v <= PI);
+            let turns = (v / (PI / 4.0)).rem_euclid(8.0);
+            assert!((turns - k as f64).abs() < 1e-9, "roll {v}");
         }
     }
 

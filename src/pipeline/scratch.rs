@@ -1,6 +1,12 @@
 //! The pose of a frame with nothing known: the template search, then the limb poses
 //! ([`super::limbs`]), then the body's size ([`super::size`]). `Estimator::estimate`
 //! and a track's first frame both run it.
+//!
+//! A result that explains the depth worse than `lost_discrepancy` (what the tracker
+//! calls lost) may be a body the first views misread: upside down but about vertical,
+//! doubled up, or in a pose no template holds upright but one holds rolled. The search
+//! then also runs on the frame seen at every eighth of a turn, and the fit whose body
+//! explains the depth better is kept. Frames explained well pay nothing for it.
 
 use super::estimator::{Estimator, Frame};
 use super::result::Clock;
@@ -8,6 +14,11 @@ use super::size::SizedFit;
 use crate::error::Result;
 
 impl Estimator {
+    /// How a sized fit competes: its discrepancy plus the rest-pose penalty.
+    fn rank(&self, sized: &SizedFit) -> f64 {
+        sized.score + self.penalty(&sized.fit.pose)
+    }
+
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
     /// labelled at every pixel. Laps `clock` at "templates" and "fit".
     pub(crate) fn fit_from_scratch(
@@ -19,7 +30,22 @@ impl Estimator {
         let hypotheses = self.config().hypotheses;
         let (best, score) = self.search(frame, &[], hypotheses, Some(clock))?;
         let (best, score) = self.repose_limbs(frame, best, score)?;
-        let sized = self.fit_size(frame, best, score, size)?;
+        let unsized_rank = score + self.penalty(&best.pose);
+        let mut sized = self.fit_size(frame, best, score, size)?;
+        let rolls = self.wide_rolls(frame);
+        if sized.score > self.config().lost_discrepancy && !rolls.is_empty() {
+            // A body explained this badly may be one the first views misread: the wide
+            // search runs too. Its best is sized only when it explains the depth better
+            // at the model's own size, and the better sized fit is kept.
+            let (best, score) = self.search_views(frame, &[], hypotheses, &rolls, None)?;
+            let (best, score) = self.repose_limbs(frame, best, score)?;
+            if score + self.penalty(&best.pose) < unsized_rank {
+                let other = self.fit_size(frame, best, score, size)?;
+                if self.rank(&other) < self.rank(&sized) {
+                    sized = other;
+                }
+            }
+        }
         clock.lap("fit");
         Ok(sized)
     }

@@ -350,3 +350,34 @@ fn the_lost_test_allows_for_the_known_depth_noise() {
     assert_eq!(run(None), frames.len());
     assert_eq!(run(Some(noise)), 0);
 }
+
+#[test]
+fn a_body_upside_down_is_found_by_the_wide_search() {
+    // A handstand 3 m away, legs apart, arms out: about vertical, so the first views
+    // search it only as it is (upright templates), which explains it badly.
+    let model = BodyModel::default();
+    let camera = Camera::itop();
+    let mut upright = BodyModel::neutral_pose();
+    upright[2] = 3.0;
+    upright[9] = 1.2; // right shoulder abduction
+    upright[13] = 1.2;
+    upright[17] = 0.35; // right hip abduction
+    upright[20] = 0.35;
+    let pose = orientation::rotate_about_optical_axis(&upright, std::f64::consts::PI - 0.1);
+    let (depth, labels) = model.render_depth(&pose, &camera);
+    let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+    let est = estimator(&camera, PipelineConfig::default());
+    let r = crate::pool::on_worker(|| {
+        let mut frame = est.prepare(&depth, Some(&mask), None)?;
+        let (_, first) = est.search(&mut frame, &[], est.config().hypotheses, None)?;
+        assert!(
+            first > est.config().lost_discrepancy,
+            "the first views explain it with discrepancy {first}"
+        );
+        est.estimate(&depth, Some(&mask))
+    })
+    .unwrap();
+    let err = mean_joint_error(&r, &pose);
+    assert!(err < 0.06, "mean joint error {err}");
+    assert!(r.discrepancy < 0.3, "{}", r.discrepancy);
+}

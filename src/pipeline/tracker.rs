@@ -296,7 +296,17 @@ impl Tracker {
             limbs_swapped(&pose, true, false),
             limbs_swapped(&pose, false, true),
         ];
-        let (best, best_score) = est.search(&mut frame, &own, n, None)?;
+        let (mut best, mut best_score) = est.search(&mut frame, &own, n, None)?;
+        if lost && self.badly_explained(&frame, best_score) {
+            // Still explained badly: the wide search, as from scratch.
+            let rolls = est.wide_rolls(&frame);
+            if !rolls.is_empty() {
+                let (other, other_score) = est.search_views(&mut frame, &[], n, &rolls, None)?;
+                if other_score + est.penalty(&other.pose) < best_score + est.penalty(&best.pose) {
+                    (best, best_score) = (other, other_score);
+                }
+            }
+        }
         let margin = if lost { 0.0 } else { cfg.switch_margin };
         let rank_best = best_score + est.penalty(&best.pose);
         let rank_track = score + est.penalty(&pose);
@@ -342,19 +352,27 @@ impl Tracker {
         n > 0 && inliers as f64 >= self.estimator.config().min_inlier_share * n as f64
     }
 
+    /// A depth discrepancy above `lost_discrepancy`, raised by what the sensor's known
+    /// depth noise adds to a good fit's.
+    fn badly_explained(&self, frame: &Frame, score: f64) -> bool {
+        let cfg = self.estimator.config();
+        if score <= cfg.lost_discrepancy {
+            return false;
+        }
+        let sigma = cfg.fit.em.sigma;
+        let added = self.depth_noise.map_or(0.0, |n| {
+            n.discrepancy_added(&frame.depth, &frame.mask, sigma, DISCREPANCY_CAP)
+        });
+        score > cfg.lost_discrepancy + added
+    }
+
     fn lost(&self, frame: &Frame, labels: &[i16], score: f64) -> bool {
         let cfg = self.estimator.config();
         if !self.explains_enough(frame, labels) {
             return true;
         }
-        if score > cfg.lost_discrepancy {
-            let sigma = cfg.fit.em.sigma;
-            let added = self.depth_noise.map_or(0.0, |n| {
-                n.discrepancy_added(&frame.depth, &frame.mask, sigma, DISCREPANCY_CAP)
-            });
-            if score > cfg.lost_discrepancy + added {
-                return true;
-            }
+        if self.badly_explained(frame, score) {
+            return true;
         }
         let recent = &self.track.recent;
         if recent.len() >= RECENT_MIN {
