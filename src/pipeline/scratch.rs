@@ -35,13 +35,16 @@ impl Estimator {
         let rolls = self.wide_rolls(frame);
         if sized.score > self.config().lost_discrepancy && !rolls.is_empty() {
             // A body explained this badly may be one the first views misread: the wide
-            // search runs too. Its best is sized only when it explains the depth better
-            // at the model's own size, and the better sized fit is kept.
+            // search runs too. Its readings are the less likely ones (a body upright in
+            // the image is by far the commonest), so, like a tracker's re-check, it
+            // replaces the first result only when it ranks better by `switch_margin`:
+            // at the model's own size first, then sized.
             let (best, score) = self.search_views(frame, &[], hypotheses, &rolls, None)?;
             let (best, score) = self.repose_limbs(frame, best, score)?;
-            if score + self.penalty(&best.pose) < unsized_rank {
+            let keep = 1.0 - self.config().switch_margin;
+            if score + self.penalty(&best.pose) < unsized_rank * keep {
                 let other = self.fit_size(frame, best, score, size)?;
-                if self.rank(&other) < self.rank(&sized) {
+                if self.rank(&other) < self.rank(&sized) * keep {
                     sized = other;
                 }
             }

@@ -298,7 +298,8 @@ impl Tracker {
         ];
         let (mut best, mut best_score) = est.search(&mut frame, &own, n, None)?;
         if lost && self.badly_explained(&frame, best_score) {
-            // Still explained badly: the wide search, as from scratch.
+            // Still explained badly: the wide search, as from scratch. A lost track has
+            // no reading to defend, so the better-ranked fit is kept with no margin.
             let rolls = est.wide_rolls(&frame);
             if !rolls.is_empty() {
                 let (other, other_score) = est.search_views(&mut frame, &[], n, &rolls, None)?;
