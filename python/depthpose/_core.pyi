@@ -902,14 +902,16 @@ class PipelineConfig:
         this value (raised by what a stereo rig's depth noise adds). Default 1.6 and
         0.5. A search whose best body explains the depth worse than
         ``lost_discrepancy`` (from scratch, or on a lost frame) also runs on the frame
-        seen at every eighth of a turn about the optical axis (with ``any_roll``).
+        seen at every eighth of a turn about the optical axis (with ``any_roll``); from
+        scratch its fit is kept when it ranks better by ``switch_margin``.
     recheck_every
         Tracking: the template search also runs every this many frames, not only when
         the track is lost (0 = only when lost). Default 0.
     recheck_hypotheses, lost_hypotheses
         Template hypotheses of a re-check and of a lost frame. Default 4 and 8.
     switch_margin
-        A re-check switches when it explains the depth better by this share. Default 0.1.
+        A re-check switches when it explains the depth better by this share, and from
+        scratch the wide search's fit replaces the first by the same. Default 0.1.
     pose_prior_weight
         Weight of the rest-pose penalty where poses compete. Default 0.005.
     size_range, size_step

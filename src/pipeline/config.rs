@@ -49,8 +49,10 @@ pub struct PipelineConfig {
     /// ... or its depth discrepancy exceeds this many times the running median of the
     /// track's recent ones, ...
     pub lost_ratio: f64,
-    /// ... or this absolute value (raised by what the sensor's noise adds, when the
-    /// tracker knows it: see [`super::Tracker::set_depth_noise`]).
+    /// ... or this absolute value (raised by what the sensor's noise adds, when it is
+    /// known: see [`super::Estimator::set_depth_noise`]). A search whose best body
+    /// explains the depth worse than this also runs the wide search (every eighth of a
+    /// turn about the optical axis; with `any_roll`).
     pub lost_discrepancy: f64,
     /// Tracking: every this many frames the template search runs again and the track
     /// switches when a hypothesis explains the depth clearly better (0 = never: the
@@ -61,7 +63,8 @@ pub struct PipelineConfig {
     pub recheck_hypotheses: usize,
     /// Tracking: template hypotheses refined when the track is lost.
     pub lost_hypotheses: usize,
-    /// "Clearly better": a lower discrepancy by at least this share.
+    /// "Clearly better": a lower discrepancy by at least this share. From scratch, the
+    /// wide search's fit replaces the first by the same margin.
     pub switch_margin: f64,
     /// Weight of the rest-pose term added to the depth discrepancy wherever poses
     /// compete: `pose_prior_weight` × Σ θ² over the 14 limb angles (radians; 0 is the

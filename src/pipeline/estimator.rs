@@ -14,7 +14,7 @@ use crate::body::{BodyModel, Pose};
 use crate::camera::Camera;
 use crate::cloud::DepthView;
 use crate::error::{Error, Result};
-use crate::fit::{FitConfig, FitProblem, FitResult, PosePrior};
+use crate::fit::{DepthNoise, FitConfig, FitProblem, FitResult, PosePrior};
 use crate::render::depth_discrepancy;
 use crate::segment::{segment_person, SegmentHint, Segmentation};
 use crate::templates::{MatchConfig, TemplateDatabase};
@@ -41,6 +41,8 @@ pub struct Estimator {
     background: Option<Vec<f32>>,
     /// Whether a search from scratch also finds the body's size ([`super::size`]).
     size_search: bool,
+    /// The depth sensor's noise, when known ([`Self::set_depth_noise`]).
+    depth_noise: Option<DepthNoise>,
 }
 
 /// A fit on its way into a [`PoseResult`].
@@ -92,7 +94,31 @@ impl Estimator {
             config,
             background,
             size_search: true,
+            depth_noise: None,
         })
+    }
+
+    /// Tells the estimator the depth sensor's noise (None: unknown, taken as none).
+    /// What counts as a badly explained body ([`Self::explains_badly`]) then allows for
+    /// what the noise adds to the discrepancy of a body whose own residuals have the
+    /// fit's scale ([`DepthNoise::discrepancy_added`]).
+    pub fn set_depth_noise(&mut self, noise: Option<DepthNoise>) {
+        self.depth_noise = noise;
+    }
+
+    /// Whether a fit with depth discrepancy `score` explains the frame badly: above
+    /// `lost_discrepancy`, raised by what the known depth noise adds. A tracker counts
+    /// the frame lost then; a search runs the wide search.
+    pub fn explains_badly(&self, frame: &Frame, score: f64) -> bool {
+        let cfg = &self.config;
+        if score <= cfg.lost_discrepancy {
+            return false;
+        }
+        let sigma = cfg.fit.em.sigma;
+        let added = self.depth_noise.map_or(0.0, |n| {
+            n.discrepancy_added(&frame.depth, &frame.mask, sigma, DISCREPANCY_CAP)
+        });
+        score > cfg.lost_discrepancy + added
     }
 
     /// This estimator, with or without the size search from scratch (on by default;

@@ -2,11 +2,12 @@
 //! ([`super::limbs`]), then the body's size ([`super::size`]). `Estimator::estimate`
 //! and a track's first frame both run it.
 //!
-//! A result that explains the depth worse than `lost_discrepancy` (what the tracker
-//! calls lost) may be a body the first views misread: upside down but about vertical,
-//! doubled up, or in a pose no template holds upright but one holds rolled. The search
-//! then also runs on the frame seen at every eighth of a turn, and the fit whose body
-//! explains the depth better is kept. Frames explained well pay nothing for it.
+//! A result that explains the depth badly ([`Estimator::explains_badly`]: what the
+//! tracker calls lost) may be a body the first views misread: upside down but about
+//! vertical, doubled up, or in a pose no template holds upright but one holds rolled.
+//! The search then also runs on the frame seen at every eighth of a turn, and its fit
+//! replaces the first when it ranks better by `switch_margin`. Frames explained well pay
+//! nothing for it.
 
 use super::estimator::{Estimator, Frame};
 use super::result::Clock;
@@ -33,7 +34,7 @@ impl Estimator {
         let unsized_rank = score + self.penalty(&best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
         let rolls = self.wide_rolls(frame);
-        if sized.score > self.config().lost_discrepancy && !rolls.is_empty() {
+        if self.explains_badly(frame, sized.score) && !rolls.is_empty() {
             // A body explained this badly may be one the first views misread: the wide
             // search runs too. Its readings are the less likely ones (a body upright in
             // the image is by far the commonest), so, like a tracker's re-check, it

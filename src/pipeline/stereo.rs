@@ -329,8 +329,10 @@ pub struct StereoPose {
 impl StereoPipeline {
     /// A pipeline for pairs of `stereo`'s rig, estimating each pair from scratch with
     /// `estimator`, or tracking with `tracker`. The estimator's segmentation settings
-    /// should come from [`StereoDepth::segment_config`].
-    pub fn estimating(stereo: StereoDepth, estimator: Estimator) -> Self {
+    /// should come from [`StereoDepth::segment_config`]; it is told the rig's depth
+    /// noise.
+    pub fn estimating(stereo: StereoDepth, mut estimator: Estimator) -> Self {
+        estimator.set_depth_noise(stereo.depth_noise());
         StereoPipeline {
             stereo,
             stage: Stage::Estimate(Box::new(estimator)),
@@ -338,7 +340,7 @@ impl StereoPipeline {
         }
     }
 
-    /// The tracker's lost test is told the rig's depth noise.
+    /// The tracker's lost test and search are told the rig's depth noise.
     pub fn tracking(stereo: StereoDepth, mut tracker: Tracker) -> Self {
         tracker.set_depth_noise(stereo.depth_noise());
         StereoPipeline {

@@ -23,7 +23,7 @@
 //! outside the person's mask; once it is reliable, the next frames' segmentation uses it
 //! ([`crate::segment::Method::Learned`]). It survives `reset` (the same scene).
 
-use super::estimator::{Estimator, Fitted, Frame, DISCREPANCY_CAP};
+use super::estimator::{Estimator, Fitted, Frame};
 use super::hypotheses::swap_limbs;
 use super::result::{Clock, PoseResult, Source};
 use crate::body::{param, root_rotation, BodyModel, Pose, NUM_SHAPE_FACTORS};
@@ -81,8 +81,6 @@ pub struct Tracker {
     pub switches: usize,
     /// The learned background, when it learns one.
     background: Option<BackgroundModel>,
-    /// The depth sensor's noise, when known: the lost test allows for it.
-    depth_noise: Option<DepthNoise>,
 }
 
 impl Tracker {
@@ -107,16 +105,13 @@ impl Tracker {
             lost_frames: 0,
             switches: 0,
             background,
-            depth_noise: None,
         }
     }
 
-    /// Tells the lost test the depth sensor's noise (None: unknown, taken as none).
-    /// The absolute threshold `lost_discrepancy` then rises by as much as the noise
-    /// raises the discrepancy of a body whose own residuals have the fit's scale
-    /// ([`DepthNoise::discrepancy_added`]).
+    /// Tells the lost test and the search the depth sensor's noise (see
+    /// [`Estimator::set_depth_noise`]).
     pub fn set_depth_noise(&mut self, noise: Option<DepthNoise>) {
-        self.depth_noise = noise;
+        self.estimator.set_depth_noise(noise);
     }
 
     pub fn estimator(&self) -> &Estimator {
@@ -297,7 +292,7 @@ impl Tracker {
             limbs_swapped(&pose, false, true),
         ];
         let (mut best, mut best_score) = est.search(&mut frame, &own, n, None)?;
-        if lost && self.badly_explained(&frame, best_score) {
+        if lost && est.explains_badly(&frame, best_score) {
             // Still explained badly: the wide search, as from scratch. A lost track has
             // no reading to defend, so the better-ranked fit is kept with no margin.
             let rolls = est.wide_rolls(&frame);
@@ -353,26 +348,12 @@ impl Tracker {
         n > 0 && inliers as f64 >= self.estimator.config().min_inlier_share * n as f64
     }
 
-    /// A depth discrepancy above `lost_discrepancy`, raised by what the sensor's known
-    /// depth noise adds to a good fit's.
-    fn badly_explained(&self, frame: &Frame, score: f64) -> bool {
-        let cfg = self.estimator.config();
-        if score <= cfg.lost_discrepancy {
-            return false;
-        }
-        let sigma = cfg.fit.em.sigma;
-        let added = self.depth_noise.map_or(0.0, |n| {
-            n.discrepancy_added(&frame.depth, &frame.mask, sigma, DISCREPANCY_CAP)
-        });
-        score > cfg.lost_discrepancy + added
-    }
-
     fn lost(&self, frame: &Frame, labels: &[i16], score: f64) -> bool {
         let cfg = self.estimator.config();
         if !self.explains_enough(frame, labels) {
             return true;
         }
-        if self.badly_explained(frame, score) {
+        if self.estimator.explains_badly(frame, score) {
             return true;
         }
         let recent = &self.track.recent;
