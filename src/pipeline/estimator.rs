@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 use crate::fit::{DepthNoise, FitConfig, FitProblem, FitResult, PosePrior};
 use crate::render::depth_discrepancy;
 use crate::segment::{segment_person, SegmentHint, Segmentation};
-use crate::templates::{MatchConfig, TemplateDatabase};
+use crate::templates::{Candidate, MatchConfig, TemplateDatabase};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -323,29 +323,40 @@ impl Estimator {
             shortlist: SHORTLIST.max(self.config.candidates),
             ..MatchConfig::default()
         };
-        let mut candidates = Vec::new();
-        for &roll in rotations {
-            if roll == 0.0 {
-                let view = DepthView::new(&frame.depth, camera.height, camera.width, "depth")?;
-                let found =
-                    self.templates
-                        .match_depth(&view, camera, Some(&frame.mask), &config)?;
-                candidates.extend(found.candidates);
-            } else {
+        // The views are matched in parallel (each match is parallel over the templates
+        // too, but its descriptors are not) and their candidates kept in view order.
+        let per_view: Vec<Result<Vec<Candidate>>> = rotations
+            .par_iter()
+            .map(|&roll| {
+                if roll == 0.0 {
+                    let view = DepthView::new(&frame.depth, camera.height, camera.width, "depth")?;
+                    let found =
+                        self.templates
+                            .match_depth(&view, camera, Some(&frame.mask), &config)?;
+                    return Ok(found.candidates);
+                }
                 let v = rotated_view(&frame.depth, &frame.mask, camera, -roll, VIEW_MARGIN)?;
                 let c = &v.camera;
                 let view = DepthView::new(&v.depth, c.height, c.width, "depth")?;
                 let found = match self.templates.match_depth(&view, c, Some(&v.mask), &config) {
                     Ok(f) => f,
                     // A view the matcher cannot use (too few pixels) adds nothing.
-                    Err(Error::NoBody(_)) => continue,
+                    Err(Error::NoBody(_)) => return Ok(Vec::new()),
                     Err(e) => return Err(e),
                 };
-                candidates.extend(found.candidates.into_iter().map(|mut k| {
-                    k.pose = rotate_about_optical_axis(&k.pose, roll);
-                    k
-                }));
-            }
+                Ok(found
+                    .candidates
+                    .into_iter()
+                    .map(|mut k| {
+                        k.pose = rotate_about_optical_axis(&k.pose, roll);
+                        k
+                    })
+                    .collect())
+            })
+            .collect();
+        let mut candidates = Vec::new();
+        for found in per_view {
+            candidates.extend(found?);
         }
         if candidates.is_empty() {
             return Err(Error::NoBody(

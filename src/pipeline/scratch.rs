@@ -21,7 +21,8 @@ impl Estimator {
     }
 
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
-    /// labelled at every pixel. Laps `clock` at "templates" and "fit".
+    /// labelled at every pixel. Laps `clock` at "templates", "fit" and, when the wide
+    /// search runs, "wide".
     pub(crate) fn fit_from_scratch(
         &self,
         frame: &mut Frame,
@@ -33,6 +34,7 @@ impl Estimator {
         let (best, score) = self.repose_limbs(frame, best, score)?;
         let unsized_rank = score + self.penalty(&best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
+        clock.lap("fit");
         let rolls = self.wide_rolls(frame);
         if self.explains_badly(frame, sized.score) && !rolls.is_empty() {
             // A body explained this badly may be one the first views misread: the wide
@@ -49,8 +51,8 @@ impl Estimator {
                     sized = other;
                 }
             }
+            clock.lap("wide");
         }
-        clock.lap("fit");
         Ok(sized)
     }
 }

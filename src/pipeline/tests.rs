@@ -122,6 +122,8 @@ fn the_estimator_finds_a_body_in_a_room_without_a_background() {
     for stage in ["foreground", "templates", "fit"] {
         assert!(r.timings.get(stage).is_some(), "{stage}");
     }
+    // A body explained well does not run the wide search.
+    assert!(r.timings.get("wide").is_none());
     let sum: f64 = r.timings.stages.iter().map(|s| s.1).sum();
     assert!(r.timings.total >= sum);
 }
@@ -377,6 +379,7 @@ fn a_body_upside_down_is_found_by_the_wide_search() {
         est.estimate(&depth, Some(&mask))
     })
     .unwrap();
+    assert!(r.timings.get("wide").is_some(), "the wide search ran");
     let err = mean_joint_error(&r, &pose);
     assert!(err < 0.06, "mean joint error {err}");
     assert!(r.discrepancy < 0.3, "{}", r.discrepancy);
