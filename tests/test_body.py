@@ -23,6 +23,8 @@ def test_names_and_bounds():
     m = BodyModel()
     assert len(m.param_names) == 22 and len(m.joint_names) == 15 and len(m.part_names) == 16
     assert m.joint_names[:4] == ["Head", "Neck", "RShoulder", "LShoulder"]
+    # The package exports the same names, defined once in the native core.
+    assert depthpose.JOINT_NAMES == m.joint_names
     lo, hi = m.lower_bounds, m.upper_bounds
     assert np.all(np.isinf(lo[:6])) and np.all(np.isinf(hi[:6]))
     assert np.all(lo[6:] < hi[6:])

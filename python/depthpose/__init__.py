@@ -23,6 +23,7 @@ from __future__ import annotations
 
 from . import export, graphcut, io, stereo, synth, viz
 from ._core import (
+    JOINT_NAMES,
     MAX_ARRAY_ELEMENTS,
     MAX_FIT_POINTS,
     MAX_IMAGE_PIXELS,
@@ -66,6 +67,7 @@ from .templates import Candidate, TemplateDatabase, surface_context
 
 __all__ = [
     "BodyModel",
+    "JOINT_NAMES",
     "PipelineConfig",
     "PoseEstimator",
     "PoseResult",

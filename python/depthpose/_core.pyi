@@ -854,6 +854,9 @@ def segment_person(
 
 # ---- pipeline -----------------------------------------------------------------------
 JOINT_NAMES: list[str]
+"""The 15 joints of every result, in the order of ``PoseResult.joints`` (rows) and of
+the ground truth the evaluation tools read: Head, Neck, RShoulder, LShoulder, RElbow,
+LElbow, RHand, LHand, Torso, RHip, LHip, RKnee, LKnee, RFoot, LFoot."""
 
 @final
 class PipelineConfig:
