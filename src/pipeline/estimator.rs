@@ -285,8 +285,14 @@ impl Estimator {
         scores
             .iter()
             .zip(poses)
-            .map(|(s, p)| s + self.penalty(p))
+            .map(|(&s, p)| self.rank(s, p))
             .collect()
+    }
+
+    /// How a pose with depth discrepancy `score` competes: the discrepancy plus the
+    /// rest-pose penalty ([`Self::penalty`]); lower is better.
+    pub(crate) fn rank(&self, score: f64, pose: &Pose) -> f64 {
+        score + self.penalty(pose)
     }
 
     /// The rest-pose penalty a pose's discrepancy is charged when poses compete.
@@ -383,18 +389,24 @@ impl Estimator {
         self.search_views(frame, extra, hypotheses, &rolls, clock)
     }
 
-    /// The views of the wide search, for a body the first views misread (upside down,
-    /// doubled up, lying): every eighth of a turn ([`every_roll`]) not among the first
-    /// views. Empty without `any_roll`.
-    pub(crate) fn wide_rolls(&self, frame: &Frame) -> Vec<f64> {
+    /// The wide search, for a body the first views misread (upside down, doubled up,
+    /// lying): [`Self::search_views`] on the views at every eighth of a turn
+    /// ([`every_roll`]) not among the first views. None without `any_roll`.
+    pub(crate) fn search_wide(
+        &self,
+        frame: &mut Frame,
+        hypotheses: usize,
+    ) -> Result<Option<(FitResult, f64)>> {
         if !self.config.any_roll {
-            return Vec::new();
+            return Ok(None);
         }
         let first = self.first_rolls(frame);
-        every_roll()
+        let wide: Vec<f64> = every_roll()
             .into_iter()
             .filter(|r| !first.iter().any(|f| (f - r).abs() < 1e-9))
-            .collect()
+            .collect();
+        self.search_views(frame, &[], hypotheses, &wide, None)
+            .map(Some)
     }
 
     /// The best fit from the template hypotheses on the views rolled by `rotations`

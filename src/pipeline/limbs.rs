@@ -103,7 +103,7 @@ impl Estimator {
         if !self.config().limb_poses {
             return Ok((fit, score));
         }
-        let current = score + self.penalty(&fit.pose);
+        let current = self.rank(score, &fit.pose);
         let (start, _, changed) = best_limbs(&fit.pose, current, |poses| {
             Ok(self.rankings(&self.discrepancies(frame, poses)?, poses))
         })?;
@@ -117,7 +117,7 @@ impl Estimator {
             .pop()
             .expect("one fit");
         let (refit_score, _) = self.discrepancy(frame, &refit.pose);
-        if refit_score + self.penalty(&refit.pose) < current {
+        if self.rank(refit_score, &refit.pose) < current {
             Ok((refit, refit_score))
         } else {
             Ok((fit, score))

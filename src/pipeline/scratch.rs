@@ -15,11 +15,6 @@ use super::size::SizedFit;
 use crate::error::Result;
 
 impl Estimator {
-    /// How a sized fit competes: its discrepancy plus the rest-pose penalty.
-    fn rank(&self, sized: &SizedFit) -> f64 {
-        sized.score + self.penalty(&sized.fit.pose)
-    }
-
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
     /// labelled at every pixel. Laps `clock` at "templates", "fit" and, when the wide
     /// search runs, "wide".
@@ -32,26 +27,27 @@ impl Estimator {
         let hypotheses = self.config().hypotheses;
         let (best, score) = self.search(frame, &[], hypotheses, Some(clock))?;
         let (best, score) = self.repose_limbs(frame, best, score)?;
-        let unsized_rank = score + self.penalty(&best.pose);
+        let unsized_rank = self.rank(score, &best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
         clock.lap("fit");
-        let rolls = self.wide_rolls(frame);
-        if self.explains_badly(frame, sized.score) && !rolls.is_empty() {
+        if self.explains_badly(frame, sized.score) {
             // A body explained this badly may be one the first views misread: the wide
             // search runs too. Its readings are the less likely ones (a body upright in
             // the image is by far the commonest), so, like a tracker's re-check, it
             // replaces the first result only when it ranks better by `switch_margin`:
             // at the model's own size first, then sized.
-            let (best, score) = self.search_views(frame, &[], hypotheses, &rolls, None)?;
-            let (best, score) = self.repose_limbs(frame, best, score)?;
-            let keep = 1.0 - self.config().switch_margin;
-            if score + self.penalty(&best.pose) < unsized_rank * keep {
-                let other = self.fit_size(frame, best, score, size)?;
-                if self.rank(&other) < self.rank(&sized) * keep {
-                    sized = other;
+            if let Some((best, score)) = self.search_wide(frame, hypotheses)? {
+                let (best, score) = self.repose_limbs(frame, best, score)?;
+                let keep = 1.0 - self.config().switch_margin;
+                if self.rank(score, &best.pose) < unsized_rank * keep {
+                    let other = self.fit_size(frame, best, score, size)?;
+                    let sized_rank = self.rank(sized.score, &sized.fit.pose);
+                    if self.rank(other.score, &other.fit.pose) < sized_rank * keep {
+                        sized = other;
+                    }
                 }
+                clock.lap("wide");
             }
-            clock.lap("wide");
         }
         Ok(sized)
     }

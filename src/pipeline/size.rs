@@ -67,7 +67,7 @@ impl Estimator {
             model: self.model().clone(),
         };
         if steps > 0 {
-            let mut rank = best.score + self.penalty(&best.fit.pose);
+            let mut rank = self.rank(best.score, &best.fit.pose);
             // One short EM from the fitted pose per size: it is on the body already.
             let config = cfg.short_refit();
             let start = best.fit.pose;
@@ -78,7 +78,7 @@ impl Estimator {
                 let tried = self.fits_at_sizes(frame, &config, &start, &round)?;
                 let mut moved = None;
                 for t in tried {
-                    let r = t.score + self.penalty(&t.fit.pose);
+                    let r = self.rank(t.score, &t.fit.pose);
                     if r < rank {
                         rank = r;
                         moved = Some(t.scale);

@@ -295,17 +295,15 @@ impl Tracker {
         if lost && est.explains_badly(&frame, best_score) {
             // Still explained badly: the wide search, as from scratch. A lost track has
             // no reading to defend, so the better-ranked fit is kept with no margin.
-            let rolls = est.wide_rolls(&frame);
-            if !rolls.is_empty() {
-                let (other, other_score) = est.search_views(&mut frame, &[], n, &rolls, None)?;
-                if other_score + est.penalty(&other.pose) < best_score + est.penalty(&best.pose) {
+            if let Some((other, other_score)) = est.search_wide(&mut frame, n)? {
+                if est.rank(other_score, &other.pose) < est.rank(best_score, &best.pose) {
                     (best, best_score) = (other, other_score);
                 }
             }
         }
         let margin = if lost { 0.0 } else { cfg.switch_margin };
-        let rank_best = best_score + est.penalty(&best.pose);
-        let rank_track = score + est.penalty(&pose);
+        let rank_best = est.rank(best_score, &best.pose);
+        let rank_track = est.rank(score, &pose);
         let switch = rank_best < rank_track * (1.0 - margin);
         if switch {
             let best = est.label_all(&mut frame, best, est.model())?;
