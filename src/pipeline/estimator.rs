@@ -587,7 +587,7 @@ pub(crate) fn stable_order(values: &[f64]) -> Vec<usize> {
 }
 
 /// The index of the first smallest value.
-fn first_min(values: &[f64]) -> usize {
+pub(super) fn first_min(values: &[f64]) -> usize {
     let mut k = 0;
     for (i, v) in values.iter().enumerate() {
         if *v < values[k] {

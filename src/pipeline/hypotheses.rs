@@ -52,16 +52,22 @@ pub fn mirror_view(pose: &Pose) -> Pose {
     out
 }
 
-/// The body turned about its own vertical axis (body y) through the hip centre by a
-/// half turn: a front view becomes a back view with the same limb angles. The image
-/// silhouette of the turned body is about the mirror image of the original's, so
-/// `turn_around(mirror_view(p))` is the back-view reading of a front-view template
-/// `p`. An involution up to the rotation vector's representation.
-pub fn turn_around(pose: &Pose) -> Pose {
-    let r = root_rotation(pose) * Rotation3::from_axis_angle(&Vector3::y_axis(), PI);
+/// The body turned about its own vertical axis (body y) through the hip centre by
+/// `angle` (radians), limb angles unchanged.
+pub fn turned(pose: &Pose, angle: f64) -> Pose {
+    let r = root_rotation(pose) * Rotation3::from_axis_angle(&Vector3::y_axis(), angle);
     let mut out = *pose;
     out[3..6].copy_from_slice(r.scaled_axis().as_slice());
     out
+}
+
+/// The body turned about its own vertical axis by a half turn ([`turned`]): a front
+/// view becomes a back view with the same limb angles. The image silhouette of the
+/// turned body is about the mirror image of the original's, so
+/// `turn_around(mirror_view(p))` is the back-view reading of a front-view template
+/// `p`. An involution up to the rotation vector's representation.
+pub fn turn_around(pose: &Pose) -> Pose {
+    turned(pose, PI)
 }
 
 /// `weight` × Σ θ² over the 14 limb angles (radians; 0 is the rest pose: arms hanging,

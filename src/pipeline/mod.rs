@@ -20,10 +20,11 @@ pub mod scratch;
 pub mod size;
 pub mod stereo;
 pub mod tracker;
+pub mod turns;
 
 pub use config::PipelineConfig;
 pub use estimator::Estimator;
-pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs, turn_around};
+pub use hypotheses::{mirror_view, rest_pose_penalty, swap_limbs, turn_around, turned};
 pub use result::{PoseResult, SegmentSummary, Source, Timings};
 pub use size::{size_steps, SizedFit};
 pub use stereo::{StereoDepth, StereoDepthConfig, StereoPipeline, StereoPose, StereoRig};

@@ -1,6 +1,7 @@
 //! The pose of a frame with nothing known: the template search, then the limb poses
-//! ([`super::limbs`]), then the body's size ([`super::size`]). `Estimator::estimate`
-//! and a track's first frame both run it.
+//! ([`super::limbs`]), the turns of a badly explained fit ([`super::turns`]), then the
+//! body's size ([`super::size`]). `Estimator::estimate` and a track's first frame both
+//! run it.
 //!
 //! A result that explains the depth badly ([`Estimator::explains_badly`]: what the
 //! tracker calls lost) may be a body the first views misread: upside down but about
@@ -27,6 +28,7 @@ impl Estimator {
         let hypotheses = self.config().hypotheses;
         let (best, score) = self.search(frame, &[], hypotheses, Some(clock))?;
         let (best, score) = self.repose_limbs(frame, best, score)?;
+        let (best, score) = self.try_turns(frame, best, score)?;
         let unsized_rank = self.rank(score, &best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
         clock.lap("fit");

@@ -1,0 +1,147 @@
+//! Turns: a fit tried from the other sides of the body.
+//!
+//! The templates hold three views (front, left side, right side) and the hypotheses add
+//! their back views, so a body seen obliquely starts an eighth of a turn or more from
+//! the nearest template, and the EM, being local, can settle on a reading turned the
+//! wrong way: the body facing away instead of toward the camera, or its near side read
+//! as its far side. When a fit explains the depth badly ([`Estimator::explains_badly`]),
+//! the fitted body is turned about its own vertical axis by every other eighth of a
+//! turn, each with its limbs as fitted and exchanged, and each gets a short EM; the
+//! refit that ranks best replaces the fit when it ranks better.
+
+use super::estimator::{first_min, Estimator, Frame};
+use super::hypotheses::{swap_limbs, turned};
+use crate::body::Pose;
+use crate::error::Result;
+use crate::fit::FitResult;
+use std::f64::consts::FRAC_PI_4;
+
+/// `pose` turned about its own vertical axis by every eighth of a turn, each with its
+/// limbs as they are and exchanged ([`swap_limbs`]), but for `pose` itself: 15 poses.
+pub fn turned_starts(pose: &Pose) -> Vec<Pose> {
+    (0..8)
+        .flat_map(|k| {
+            let t = turned(pose, k as f64 * FRAC_PI_4);
+            [t, swap_limbs(&t)]
+        })
+        .skip(1)
+        .collect()
+}
+
+impl Estimator {
+    /// `fit` (with `score`, its depth discrepancy) or, when it explains the depth badly,
+    /// the best of its turned refits where that ranks better (see the module docs).
+    /// Returns the fit kept and its discrepancy.
+    pub(crate) fn try_turns(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        score: f64,
+    ) -> Result<(FitResult, f64)> {
+        if !self.explains_badly(frame, score) {
+            return Ok((fit, score));
+        }
+        let starts = turned_starts(&fit.pose);
+        let config = self.config().short_refit();
+        let fits = self.fits(frame, &config, &starts, None, None)?;
+        let poses: Vec<Pose> = fits.iter().map(|f| f.pose).collect();
+        let scores = self.discrepancies(frame, &poses)?;
+        let ranks = self.rankings(&scores, &poses);
+        let k = first_min(&ranks);
+        if ranks[k] < self.rank(score, &fit.pose) {
+            let best = fits.into_iter().nth(k).expect("k indexes the fits");
+            Ok((best, scores[k]))
+        } else {
+            Ok((fit, score))
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::{root_rotation, BodyModel};
+    use crate::camera::Camera;
+    use crate::pipeline::tests::{estimator, walking};
+    use crate::pipeline::PipelineConfig;
+    use nalgebra::Vector3;
+
+    #[test]
+    fn turned_starts_are_the_other_eighths_of_a_turn_with_limbs_as_they_are_and_exchanged() {
+        let pose = turned(&walking(&BodyModel::default(), 0.7), 0.3);
+        let starts = turned_starts(&pose);
+        assert_eq!(starts.len(), 15);
+        let r = root_rotation(&pose);
+        // Entry j of (turn k, limbs exchanged) in order is (j / 2, j odd); entry 0, the
+        // pose itself, is left out.
+        for (i, s) in starts.iter().enumerate() {
+            let j = i + 1;
+            let (k, swapped) = (j / 2, j % 2 == 1);
+            // The turn relative to the body is about its own vertical axis.
+            let rel = r.inverse() * root_rotation(s);
+            let expected =
+                nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), k as f64 * FRAC_PI_4);
+            assert!(rel.angle_to(&expected) < 1e-9, "start {i}");
+            assert_eq!(&s[..3], &pose[..3], "the hip centre stays");
+            let limbs = if swapped { swap_limbs(&pose) } else { pose };
+            assert_eq!(&s[6..], &limbs[6..], "start {i}");
+        }
+    }
+
+    #[test]
+    fn a_fit_turned_the_wrong_way_is_turned_back() {
+        // A walker seen obliquely, and a fit of it that faces five eighths of a turn
+        // away with its limbs exchanged: the short EM alone does not turn it back; the turns do.
+        let model = BodyModel::default();
+        let camera = Camera::itop();
+        let pose = turned(&walking(&model, 0.9), 0.8);
+        let (depth, labels) = model.render_depth(&pose, &camera);
+        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let est = estimator(&camera, PipelineConfig::default());
+        let error = |p: &Pose| {
+            let (a, b) = (model.joints(p), model.joints(&pose));
+            a.iter().zip(&b).map(|(x, y)| (x - y).norm()).sum::<f64>() / a.len() as f64
+        };
+        crate::pool::on_worker(|| {
+            let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
+            let config = est.config().short_refit();
+            let wrong = swap_limbs(&turned(&pose, 5.0 * FRAC_PI_4));
+            let fit = est
+                .fits(&mut frame, &config, &[wrong], None, None)
+                .unwrap()
+                .pop()
+                .unwrap();
+            let (score, _) = est.discrepancy(&frame, &fit.pose);
+            assert!(est.explains_badly(&frame, score), "discrepancy {score}");
+            assert!(error(&fit.pose) > 0.1, "error {}", error(&fit.pose));
+            let (turned_fit, turned_score) = est.try_turns(&mut frame, fit, score).unwrap();
+            assert!(turned_score < score, "{turned_score} against {score}");
+            let e = error(&turned_fit.pose);
+            assert!(e < 0.04, "mean joint error {e}");
+        });
+    }
+
+    #[test]
+    fn a_fit_that_explains_the_depth_well_is_kept_as_it_is() {
+        let model = BodyModel::default();
+        let camera = Camera::itop();
+        let pose = turned(&walking(&model, 0.9), 0.8);
+        let (depth, labels) = model.render_depth(&pose, &camera);
+        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let est = estimator(&camera, PipelineConfig::default());
+        crate::pool::on_worker(|| {
+            let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
+            let config = est.config().short_refit();
+            let fit = est
+                .fits(&mut frame, &config, &[pose], None, None)
+                .unwrap()
+                .pop()
+                .unwrap();
+            let (score, _) = est.discrepancy(&frame, &fit.pose);
+            let kept = fit.pose;
+            let (out, out_score) = est.try_turns(&mut frame, fit, score).unwrap();
+            assert_eq!(out.pose, kept);
+            assert_eq!(out_score, score);
+        });
+    }
+}
