@@ -59,8 +59,8 @@ pub const MAX_ARRAY_ELEMENTS: usize = 1 << 26;
 /// built for it): 2^30 bytes.
 pub const MAX_RESULT_BYTES: usize = 1 << 30;
 
-/// A numeric argument as an error shows it: the type's name.
-fn type_name(obj: &Bound<PyAny>) -> String {
+/// An argument as an error shows it: the name of its type.
+pub fn type_name(obj: &Bound<PyAny>) -> String {
     obj.get_type()
         .name()
         .map(|n| n.to_string())
@@ -316,6 +316,15 @@ impl Flag {
         self.0
             .clone()
             .map_err(|t| wrong_type(name, "True or False", &t))
+    }
+
+    /// An optional flag (None: `None`), or an error naming `name`.
+    pub fn optional(flag: Option<&Flag>, name: &str) -> PyResult<Option<bool>> {
+        flag.map(|f| {
+            f.0.clone()
+                .map_err(|t| wrong_type(name, "True, False or None", &t))
+        })
+        .transpose()
     }
 }
 
