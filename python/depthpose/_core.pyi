@@ -2,7 +2,7 @@
 # by mypy.stubtest (.ci/run, with .ci/stubtest_allowlist.txt) and tests/test_stub.py. The
 # native classes cannot be subclassed (@final); their constructors are __new__, as the
 # native types define them.
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from os import PathLike
 from typing import Any, final
 
@@ -258,7 +258,46 @@ def foreground_mask(
     max_step: float = 0.25,
     min_component: int = 40,
     large_share: float = 0.3,
-) -> npt.NDArray[np.bool_]: ...
+) -> npt.NDArray[np.bool_]:
+    """The person's pixels (H, W) bool.
+
+    With ``background`` (the empty scene), foreground is what lies clearly in front of it
+    (tolerance ``bg_tolerance + bg_tolerance_quadratic·z²`` metres, following the sensor's
+    quantisation), grouped into depth-continuous components (neighbours within
+    ``max_step``); the nearest component with at least ``large_share`` of the largest
+    one's pixels is the body, and large pieces next to it are kept too.
+
+    Without it, the person is found automatically (:func:`segment_person`): the floor and
+    walls are removed and the most person-like object in ``[min_depth, max_depth]`` is
+    kept. Speckles are dropped; holes stay holes.
+
+    Parameters
+    ----------
+    depth
+        (H, W) float metres or uint16 millimetres.
+    background
+        The empty scene's depth (H, W), or None.
+    camera
+        The intrinsics for the automatic segmentation (default: a camera with a 58°
+        horizontal field of view).
+    min_depth, max_depth
+        The depth range searched, metres.
+    bg_tolerance, bg_tolerance_quadratic
+        How far in front of the background a pixel must lie, ``a + b·z²`` metres.
+    max_step
+        Largest depth step between neighbours of one component, metres.
+    min_component
+        Smallest component kept, pixels.
+    large_share
+        Share of the largest component's pixels a component needs to be the body.
+
+    Raises
+    ------
+    NoBodyError
+        Nothing qualifies.
+    InvalidInputError
+        A bad argument.
+    """
 
 # ---- io -----------------------------------------------------------------------------
 def read_depth_image(
@@ -505,7 +544,7 @@ class BodyModel:
         *,
         masks: npt.NDArray[np.bool_] | Sequence[npt.NDArray[np.bool_]] | None = None,
         iterations: int = 3,
-        config: FitConfig | None = None,
+        config: FitConfig | Mapping[str, Any] | None = None,
         lm_iterations: int = 20,
         prior_weight: float = 1e5,
         bounds: tuple[float, float] | None = None,
@@ -632,27 +671,101 @@ class ShapeFitResult:
 def fit_pose(
     depth: npt.NDArray[np.generic],
     camera: Camera,
-    init_pose: npt.NDArray[np.float64],
+    init_pose: npt.ArrayLike,
     *,
     model: BodyModel | None = None,
     mask: npt.NDArray[np.bool_] | None = None,
-    config: FitConfig | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
+    config: FitConfig | Mapping[str, Any] | None = None,
+    prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
     resume: FitResult | None = None,
-) -> FitResult: ...
+) -> FitResult:
+    """Fits the body to ``depth`` from ``init_pose`` (hard EM: CRF labels and
+    Levenberg–Marquardt).
+
+    A fresh fit also runs from ``init_pose`` moved so that its visible surface's
+    centroid lies on the observed points' (when that moves it by 1 cm or more), in
+    parallel, and returns the lower-energy result; this rescues starts that are a few
+    centimetres off (``FitConfig(recentred_start=False)`` turns it off);
+    ``swapped_limb_starts=True`` also starts from the pose with its left and right legs
+    (and arms) exchanged, at up to 3x the work. With a ``stride``,
+    ``FitConfig(full_resolution_iterations=N)`` continues the strided EM on every pixel
+    for up to N iterations (coarse to fine).
+
+    Parameters
+    ----------
+    depth
+        (H, W) float metres or uint16 millimetres.
+    camera
+        The depth camera.
+    init_pose
+        The starting pose (22,).
+    model
+        The body (default ``BodyModel()``, 1.75 m reference proportions).
+    mask
+        (H, W) bool: the person's pixels (default: every reading).
+    config
+        A :class:`FitConfig`, a dict of its keyword arguments, or None (the defaults).
+    prior
+        A pose (22,): adds ``prior_weight/2 · |pose - prior|²`` to the M-step
+        (tracking).
+    prior_weight
+        The prior's weight.
+    resume
+        An earlier result on this image (e.g. a brief fit with a small
+        ``max_iterations``) whose EM goes on: it continues from ``init_pose`` (normally
+        ``resume.pose``) with ``resume``'s labels and iteration count, so the outlier
+        distance keeps annealing where it was and ``max_iterations`` counts the earlier
+        iterations. Continuing a full-resolution fit that hit its iteration limit gives
+        exactly the longer fit.
+
+    Returns
+    -------
+    FitResult
+        ``pose``, ``joints`` (15, 3), ``labels`` (H, W) int16 (-1 = background or
+        outlier), ``energy``, ``energy_trace``, ``iterations``, ``converged``,
+        ``reason``, ``part_counts`` and ``outliers``.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad argument (the message names it).
+    """
+
 def fit_poses(
     depth: npt.NDArray[np.generic],
     camera: Camera,
-    init_poses: npt.NDArray[np.float64],
+    init_poses: npt.ArrayLike,
     *,
     model: BodyModel | None = None,
     mask: npt.NDArray[np.bool_] | None = None,
-    config: FitConfig | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
+    config: FitConfig | Mapping[str, Any] | None = None,
+    prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
     resume: Sequence[FitResult] | None = None,
-) -> list[FitResult]: ...
+) -> list[FitResult]:
+    """:func:`fit_pose` from each of ``init_poses`` on the same image.
+
+    The foreground cloud and its graph are built once and the K fits run in parallel
+    (one fit's work is mostly sequential), so on several cores this is much faster than
+    K :func:`fit_pose` calls; each result is identical to its own :func:`fit_pose` call.
+
+    Parameters
+    ----------
+    init_poses
+        (K, 22) starting poses, K ≥ 1.
+    resume
+        K earlier results, the k-th continued from ``init_poses[k]`` (see
+        :func:`fit_pose`).
+
+    The other parameters are those of :func:`fit_pose`.
+
+    Returns
+    -------
+    list of FitResult
+        One per starting pose.
+    """
+
 def label_all_pixels(
     depth: npt.NDArray[np.generic],
     camera: Camera,
@@ -660,15 +773,36 @@ def label_all_pixels(
     *,
     model: BodyModel | None = None,
     mask: npt.NDArray[np.bool_] | None = None,
-    config: FitConfig | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
+    config: FitConfig | Mapping[str, Any] | None = None,
+    prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
-) -> FitResult: ...
+) -> FitResult:
+    """``result`` labelled at every pixel of ``depth``.
+
+    For a fit with a ``stride`` and ``label_all_pixels=False`` in its config (its labels
+    are the EM's, at every ``stride``-th pixel only), e.g. the best of several candidate
+    fits: one E-step at its pose from those labels, exactly what the same fit with
+    ``label_all_pixels=True`` returns. Pass the fit's own ``depth``, ``mask``,
+    ``model``, ``config`` and ``prior`` (parameters as for :func:`fit_pose`). A result
+    already labelled at every pixel, or a config without a stride, comes back
+    unchanged.
+    """
+
 def pose_from_joints(
-    joints: npt.NDArray[np.float64],
-    model: BodyModel | None = None,
-    init: npt.NDArray[np.float64] | None = None,
-) -> npt.NDArray[np.float64]: ...
+    joints: npt.ArrayLike, model: BodyModel | None = None, init: npt.ArrayLike | None = None
+) -> npt.NDArray[np.float64]:
+    """The pose (22,) whose joints best match ``joints`` (15, 3) in the camera frame
+    (inverse kinematics; NaN rows are skipped).
+
+    Parameters
+    ----------
+    joints
+        (15, 3) joint positions, metres.
+    model
+        The body (default ``BodyModel()``).
+    init
+        A starting pose (22,).
+    """
 
 # ---- graphcut -----------------------------------------------------------------------
 @final
@@ -854,7 +988,35 @@ def segment_person(
     background: npt.NDArray[np.generic] | None = None,
     *,
     previous: Segmentation | None = None,
-) -> Segmentation: ...
+) -> Segmentation:
+    """The person's pixels of a depth image, and how they were found.
+
+    With ``background`` (a frame of the empty scene), by background subtraction
+    (``method == "background"``). Without it (``method == "planes"``): the support
+    planes (floor, walls) are found by RANSAC and removed, the rest is split into
+    depth-continuous clusters, and the person is the cluster that looks most like one in
+    metres (footprint area, height, width); of comparable ones, the nearest. The result
+    lists the removed ``planes`` and the ``others``: person-like clusters not chosen.
+
+    Parameters
+    ----------
+    depth
+        (H, W) float metres or uint16 millimetres.
+    camera
+        The depth camera.
+    background
+        The empty scene's depth (H, W), or None.
+    previous
+        In a video, the previous frame's result: its planes are reused and the person
+        it found stays chosen when someone else comes nearer.
+
+    Raises
+    ------
+    NoBodyError
+        Nothing looks like a person (the message says what was found).
+    InvalidInputError
+        A bad argument.
+    """
 
 # ---- pipeline -----------------------------------------------------------------------
 JOINT_NAMES: list[str]

@@ -4,8 +4,8 @@
 
 use super::super::body::PyBodyModel;
 use super::super::convert::{
-    bool_array, camera as camera_arg, depth_array, f64_array, invalid, object, type_name,
-    wrong_type, Flag,
+    array_like, bool_array, camera as camera_arg, depth_array, f64_array, invalid, object,
+    type_name, wrong_type, Flag,
 };
 use super::super::templates::PyTemplateDatabase;
 use super::config::PyPipelineConfig;
@@ -14,7 +14,6 @@ use crate::camera::Camera;
 use crate::pipeline::{Estimator, PipelineConfig};
 use crate::templates::TemplateDatabase;
 use pyo3::prelude::*;
-use pyo3::types::{PyList, PyTuple};
 use std::sync::Arc;
 
 /// The arguments every pose class is made from, as Python passes them.
@@ -153,18 +152,7 @@ impl FrameArgs {
 /// The poses of an array of N × 22 values, (N, 22) or (22,), read row by row (a list
 /// or tuple as `numpy.asarray` reads it); a bad row is named `name[k]`.
 pub(super) fn pose_rows(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<Pose>> {
-    let array;
-    let obj = if obj.is_instance_of::<PyList>() || obj.is_instance_of::<PyTuple>() {
-        array = obj
-            .py()
-            .import("numpy")?
-            .call_method1("asarray", (obj,))
-            .map_err(|_| invalid(name, "not a rectangular array of numbers"))?;
-        &array
-    } else {
-        obj
-    };
-    let a = f64_array(obj, name, None, false)?;
+    let a = f64_array(&array_like(obj, name)?, name, None, false)?;
     if a.data.len() % NUM_PARAMS != 0 {
         return Err(invalid(
             name,

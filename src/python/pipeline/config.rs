@@ -1,7 +1,7 @@
 //! `PipelineConfig`: the estimator's and the tracker's settings, from keyword
 //! arguments.
 
-use super::super::convert::{Int, Real};
+use super::super::convert::{fit_config, Int, Real};
 use super::super::fit::PyFitConfig;
 use crate::error::Error;
 use crate::pipeline::PipelineConfig;
@@ -97,7 +97,7 @@ impl PyPipelineConfig {
                     "calibration_rounds" => c.calibration_rounds = int_field(&value, n)?,
                     "learn_background" => c.learn_background = bool_field(&value, n)?,
                     "working_focal" => c.working_focal = real_field(&value, n)?,
-                    "fit" => c.fit = fit_config_of(&value)?,
+                    "fit" => c.fit = fit_config(Some(&value), "fit")?,
                     other => {
                         return Err(Error::invalid(
                             other,
@@ -179,25 +179,4 @@ impl PyPipelineConfig {
         }
         Ok(format!("PipelineConfig({})", parts.join(", ")))
     }
-}
-
-/// A FitConfig, a dict of its keyword arguments, or None (the defaults).
-fn fit_config_of(value: &Bound<PyAny>) -> PyResult<crate::fit::FitConfig> {
-    if value.is_none() {
-        return Ok(crate::fit::FitConfig::default());
-    }
-    if let Ok(c) = value.cast::<PyFitConfig>() {
-        return Ok(c.borrow().to_rust()?);
-    }
-    if let Ok(d) = value.cast::<PyDict>() {
-        let ty = value.py().get_type::<PyFitConfig>();
-        let c = ty.call((), Some(d))?;
-        let c = c.cast::<PyFitConfig>()?;
-        return Ok(c.borrow().to_rust()?);
-    }
-    Err(super::super::convert::wrong_type(
-        "fit",
-        "a FitConfig, a dict or None",
-        &short(value),
-    ))
 }
