@@ -462,3 +462,25 @@ def test_rest_pose_term_prefers_the_ordinary_twin_of_a_hidden_arm(side_walk, tem
     )
     off = PoseEstimator(cam, templates=templates, config=PipelineConfig(pose_prior_weight=0))
     assert off.penalty(raised)[0] == 0.0
+
+
+def test_the_pose_classes_are_the_native_ones_under_every_import_path(wave, templates):
+    from depthpose import _core, pipeline, stereo_pose
+
+    assert dp.PoseEstimator is pipeline.PoseEstimator is _core.PoseEstimator
+    assert dp.PoseTracker is pipeline.PoseTracker is _core.PoseTracker
+    assert dp.StereoPoseTracker is stereo_pose.StereoPoseTracker is _core.StereoPoseTracker
+    assert issubclass(dp.StereoPoseEstimator, dp.StereoPoseTracker)
+    seq, cam, bg = wave
+    est = PoseEstimator(cam, templates=templates, background=bg)
+    depth = seq["depth"][0].astype(np.float32) / 1000
+    pose = est.estimate(depth).pose
+    # A pose as a list, one pose, and N poses read as (N, 22).
+    one = est.discrepancy(list(pose), depth)
+    np.testing.assert_array_equal(est.discrepancies(pose, depth), [one])
+    np.testing.assert_array_equal(est.discrepancies(np.stack([pose, pose]), depth), [one, one])
+    assert est.penalty([pose, pose]).shape == (2,)
+    with pytest.raises(dp.InvalidInputError, match="poses"):
+        est.discrepancies(np.ones(5), depth)
+    with pytest.raises(dp.InvalidInputError, match="pose"):
+        est.discrepancy(np.stack([pose, pose]), depth)

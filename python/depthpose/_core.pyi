@@ -2,12 +2,15 @@
 # by mypy.stubtest (.ci/run, with .ci/stubtest_allowlist.txt) and tests/test_stub.py. The
 # native classes cannot be subclassed (@final); their constructors are __new__, as the
 # native types define them.
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from os import PathLike
 from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
+from typing_extensions import Self, disjoint_base
+
+from depthpose.templates import TemplateDatabase
 
 __all__ = [
     "BodyModel",
@@ -32,13 +35,14 @@ __all__ = [
     "NoBodyError",
     "PipelineConfig",
     "Plane",
+    "PoseEstimator",
     "PoseResult",
+    "PoseTracker",
     "ResourceLimitError",
     "Segmentation",
     "ShapeFitResult",
-    "_PoseEstimator",
-    "_PoseTracker",
-    "_StereoPose",
+    "StereoPoseEstimator",
+    "StereoPoseTracker",
     "_TemplateDatabase",
     "__version__",
     "_default_model_shape",
@@ -254,7 +258,46 @@ def foreground_mask(
     max_step: float = 0.25,
     min_component: int = 40,
     large_share: float = 0.3,
-) -> npt.NDArray[np.bool_]: ...
+) -> npt.NDArray[np.bool_]:
+    """The person's pixels (H, W) bool.
+
+    With ``background`` (the empty scene), foreground is what lies clearly in front of it
+    (tolerance ``bg_tolerance + bg_tolerance_quadratic·z²`` metres, following the sensor's
+    quantisation), grouped into depth-continuous components (neighbours within
+    ``max_step``); the nearest component with at least ``large_share`` of the largest
+    one's pixels is the body, and large pieces next to it are kept too.
+
+    Without it, the person is found automatically (:func:`segment_person`): the floor and
+    walls are removed and the most person-like object in ``[min_depth, max_depth]`` is
+    kept. Speckles are dropped; holes stay holes.
+
+    Parameters
+    ----------
+    depth
+        (H, W) float metres or uint16 millimetres.
+    background
+        The empty scene's depth (H, W), or None.
+    camera
+        The intrinsics for the automatic segmentation (default: a camera with a 58°
+        horizontal field of view).
+    min_depth, max_depth
+        The depth range searched, metres.
+    bg_tolerance, bg_tolerance_quadratic
+        How far in front of the background a pixel must lie, ``a + b·z²`` metres.
+    max_step
+        Largest depth step between neighbours of one component, metres.
+    min_component
+        Smallest component kept, pixels.
+    large_share
+        Share of the largest component's pixels a component needs to be the body.
+
+    Raises
+    ------
+    NoBodyError
+        Nothing qualifies.
+    InvalidInputError
+        A bad argument.
+    """
 
 # ---- io -----------------------------------------------------------------------------
 def read_depth_image(
@@ -501,7 +544,7 @@ class BodyModel:
         *,
         masks: npt.NDArray[np.bool_] | Sequence[npt.NDArray[np.bool_]] | None = None,
         iterations: int = 3,
-        config: FitConfig | None = None,
+        config: FitConfig | Mapping[str, Any] | None = None,
         lm_iterations: int = 20,
         prior_weight: float = 1e5,
         bounds: tuple[float, float] | None = None,
@@ -628,27 +671,101 @@ class ShapeFitResult:
 def fit_pose(
     depth: npt.NDArray[np.generic],
     camera: Camera,
-    init_pose: npt.NDArray[np.float64],
+    init_pose: npt.ArrayLike,
     *,
     model: BodyModel | None = None,
     mask: npt.NDArray[np.bool_] | None = None,
-    config: FitConfig | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
+    config: FitConfig | Mapping[str, Any] | None = None,
+    prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
     resume: FitResult | None = None,
-) -> FitResult: ...
+) -> FitResult:
+    """Fits the body to ``depth`` from ``init_pose`` (hard EM: CRF labels and
+    Levenberg–Marquardt).
+
+    A fresh fit also runs from ``init_pose`` moved so that its visible surface's
+    centroid lies on the observed points' (when that moves it by 1 cm or more), in
+    parallel, and returns the lower-energy result; this rescues starts that are a few
+    centimetres off (``FitConfig(recentred_start=False)`` turns it off);
+    ``swapped_limb_starts=True`` also starts from the pose with its left and right legs
+    (and arms) exchanged, at up to 3x the work. With a ``stride``,
+    ``FitConfig(full_resolution_iterations=N)`` continues the strided EM on every pixel
+    for up to N iterations (coarse to fine).
+
+    Parameters
+    ----------
+    depth
+        (H, W) float metres or uint16 millimetres.
+    camera
+        The depth camera.
+    init_pose
+        The starting pose (22,).
+    model
+        The body (default ``BodyModel()``, 1.75 m reference proportions).
+    mask
+        (H, W) bool: the person's pixels (default: every reading).
+    config
+        A :class:`FitConfig`, a dict of its keyword arguments, or None (the defaults).
+    prior
+        A pose (22,): adds ``prior_weight/2 · |pose - prior|²`` to the M-step
+        (tracking).
+    prior_weight
+        The prior's weight.
+    resume
+        An earlier result on this image (e.g. a brief fit with a small
+        ``max_iterations``) whose EM goes on: it continues from ``init_pose`` (normally
+        ``resume.pose``) with ``resume``'s labels and iteration count, so the outlier
+        distance keeps annealing where it was and ``max_iterations`` counts the earlier
+        iterations. Continuing a full-resolution fit that hit its iteration limit gives
+        exactly the longer fit.
+
+    Returns
+    -------
+    FitResult
+        ``pose``, ``joints`` (15, 3), ``labels`` (H, W) int16 (-1 = background or
+        outlier), ``energy``, ``energy_trace``, ``iterations``, ``converged``,
+        ``reason``, ``part_counts`` and ``outliers``.
+
+    Raises
+    ------
+    InvalidInputError
+        A bad argument (the message names it).
+    """
+
 def fit_poses(
     depth: npt.NDArray[np.generic],
     camera: Camera,
-    init_poses: npt.NDArray[np.float64],
+    init_poses: npt.ArrayLike,
     *,
     model: BodyModel | None = None,
     mask: npt.NDArray[np.bool_] | None = None,
-    config: FitConfig | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
+    config: FitConfig | Mapping[str, Any] | None = None,
+    prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
     resume: Sequence[FitResult] | None = None,
-) -> list[FitResult]: ...
+) -> list[FitResult]:
+    """:func:`fit_pose` from each of ``init_poses`` on the same image.
+
+    The foreground cloud and its graph are built once and the K fits run in parallel
+    (one fit's work is mostly sequential), so on several cores this is much faster than
+    K :func:`fit_pose` calls; each result is identical to its own :func:`fit_pose` call.
+
+    Parameters
+    ----------
+    init_poses
+        (K, 22) starting poses, K ≥ 1.
+    resume
+        K earlier results, the k-th continued from ``init_poses[k]`` (see
+        :func:`fit_pose`).
+
+    The other parameters are those of :func:`fit_pose`.
+
+    Returns
+    -------
+    list of FitResult
+        One per starting pose.
+    """
+
 def label_all_pixels(
     depth: npt.NDArray[np.generic],
     camera: Camera,
@@ -656,15 +773,36 @@ def label_all_pixels(
     *,
     model: BodyModel | None = None,
     mask: npt.NDArray[np.bool_] | None = None,
-    config: FitConfig | None = None,
-    prior: npt.NDArray[np.float64] | None = None,
+    config: FitConfig | Mapping[str, Any] | None = None,
+    prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
-) -> FitResult: ...
+) -> FitResult:
+    """``result`` labelled at every pixel of ``depth``.
+
+    For a fit with a ``stride`` and ``label_all_pixels=False`` in its config (its labels
+    are the EM's, at every ``stride``-th pixel only), e.g. the best of several candidate
+    fits: one E-step at its pose from those labels, exactly what the same fit with
+    ``label_all_pixels=True`` returns. Pass the fit's own ``depth``, ``mask``,
+    ``model``, ``config`` and ``prior`` (parameters as for :func:`fit_pose`). A result
+    already labelled at every pixel, or a config without a stride, comes back
+    unchanged.
+    """
+
 def pose_from_joints(
-    joints: npt.NDArray[np.float64],
-    model: BodyModel | None = None,
-    init: npt.NDArray[np.float64] | None = None,
-) -> npt.NDArray[np.float64]: ...
+    joints: npt.ArrayLike, model: BodyModel | None = None, init: npt.ArrayLike | None = None
+) -> npt.NDArray[np.float64]:
+    """The pose (22,) whose joints best match ``joints`` (15, 3) in the camera frame
+    (inverse kinematics; NaN rows are skipped).
+
+    Parameters
+    ----------
+    joints
+        (15, 3) joint positions, metres.
+    model
+        The body (default ``BodyModel()``).
+    init
+        A starting pose (22,).
+    """
 
 # ---- graphcut -----------------------------------------------------------------------
 @final
@@ -850,7 +988,35 @@ def segment_person(
     background: npt.NDArray[np.generic] | None = None,
     *,
     previous: Segmentation | None = None,
-) -> Segmentation: ...
+) -> Segmentation:
+    """The person's pixels of a depth image, and how they were found.
+
+    With ``background`` (a frame of the empty scene), by background subtraction
+    (``method == "background"``). Without it (``method == "planes"``): the support
+    planes (floor, walls) are found by RANSAC and removed, the rest is split into
+    depth-continuous clusters, and the person is the cluster that looks most like one in
+    metres (footprint area, height, width); of comparable ones, the nearest. The result
+    lists the removed ``planes`` and the ``others``: person-like clusters not chosen.
+
+    Parameters
+    ----------
+    depth
+        (H, W) float metres or uint16 millimetres.
+    camera
+        The depth camera.
+    background
+        The empty scene's depth (H, W), or None.
+    previous
+        In a video, the previous frame's result: its planes are reused and the person
+        it found stays chosen when someone else comes nearer.
+
+    Raises
+    ------
+    NoBodyError
+        Nothing looks like a person (the message says what was found).
+    InvalidInputError
+        A bad argument.
+    """
 
 # ---- pipeline -----------------------------------------------------------------------
 JOINT_NAMES: list[str]
@@ -995,124 +1161,384 @@ class PoseResult:
     def to_json(self) -> str: ...
 
 @final
-class _PoseEstimator:
+class PoseEstimator:
+    """Pose from scratch, one depth frame at a time.
+
+    Parameters
+    ----------
+    camera
+        The depth camera (the frames' size and intrinsics). Frames from sensors of high
+        resolution are processed at a reduced working resolution; results come back in
+        the input's pixel grid.
+    model
+        The subject's body, when its shape is known. Without it the body is
+        ``BodyModel()`` (1.75 m reference proportions) scaled, frame by frame, to the
+        size that explains the depth best (``config.size_range``).
+    templates
+        A :class:`~depthpose.templates.TemplateDatabase` (default: the cached default
+        database, built on first use).
+    config
+        A :class:`PipelineConfig` (default: ``PipelineConfig()``).
+    background
+        A frame of the empty scene (H, W) for background subtraction; without it the
+        person is found automatically (:func:`~depthpose.segment_person`).
+
+    Raises
+    ------
+    InvalidTypeError
+        An argument of the wrong type (the message names it).
+    InvalidInputError
+        A background of the wrong size or content.
+    """
+
     def __new__(
         cls,
         camera: Camera,
-        templates: _TemplateDatabase,
         *,
         model: BodyModel | None = None,
+        templates: TemplateDatabase | None = None,
         config: PipelineConfig | None = None,
         background: npt.NDArray[np.generic] | None = None,
-    ) -> _PoseEstimator: ...
+    ) -> PoseEstimator: ...
+    @property
+    def camera(self) -> Camera:
+        """The camera the frames come from."""
+    @property
+    def working_camera(self) -> Camera:
+        """The camera the pipeline works with (the input's, reduced for large images)."""
+    @property
+    def model(self) -> BodyModel:
+        """The body model fitted with (``BodyModel()`` when none was given)."""
+    @property
+    def config(self) -> PipelineConfig:
+        """The settings."""
     def estimate(
         self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
-    ) -> PoseResult: ...
+    ) -> PoseResult:
+        """The pose of one frame: the person's pixels (``mask``, else found), the
+        template search with its swapped and mirrored hypotheses, EM from the most
+        promising, and the pose whose body explains the depth best.
+
+        Parameters
+        ----------
+        depth
+            (H, W) float metres or uint16 millimetres; 0 or NaN = no reading.
+        mask
+            (H, W) bool: the person's pixels (default: found automatically).
+
+        Returns
+        -------
+        PoseResult
+            The pose, its joints, labels and timings.
+
+        Raises
+        ------
+        NoBodyError
+            No person in the frame.
+        InvalidInputError
+            A bad argument.
+        """
+    def person_mask(self, depth: npt.NDArray[np.generic]) -> npt.NDArray[np.bool_]:
+        """The person's pixels (H, W) as :meth:`estimate` finds them.
+
+        Parameters
+        ----------
+        depth
+            (H, W) float metres or uint16 millimetres.
+
+        Raises
+        ------
+        NoBodyError
+            No person in the frame.
+        """
     def discrepancies(
         self,
-        poses: npt.NDArray[np.generic],
+        poses: npt.ArrayLike,
         depth: npt.NDArray[np.generic],
         mask: npt.NDArray[np.generic] | None = None,
-    ) -> npt.NDArray[np.float64]: ...
-    def penalty(self, poses: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]: ...
-    def person_mask(self, depth: npt.NDArray[np.generic]) -> npt.NDArray[np.bool_]: ...
-    @property
-    def model(self) -> BodyModel: ...
-    @property
-    def config(self) -> PipelineConfig: ...
-    @property
-    def camera(self) -> Camera: ...
-    @property
-    def working_camera(self) -> Camera: ...
+    ) -> npt.NDArray[np.float64]:
+        """How badly each pose explains a frame: the rendered body against the
+        person's pixels, the depth difference capped at 0.1 m (0 = perfectly, about
+        1 = unrelated).
+
+        Parameters
+        ----------
+        poses
+            (N, 22) poses, or one pose (22,).
+        depth
+            (H, W) float metres or uint16 millimetres.
+        mask
+            (H, W) bool: the person's pixels (default: found automatically).
+
+        Returns
+        -------
+        numpy.ndarray
+            (N,) discrepancies.
+
+        Raises
+        ------
+        NoBodyError
+            No person in the frame.
+        InvalidInputError
+            A bad argument.
+        """
+    def discrepancy(
+        self,
+        pose: npt.ArrayLike,
+        depth: npt.NDArray[np.generic],
+        mask: npt.NDArray[np.generic] | None = None,
+    ) -> float:
+        """:meth:`discrepancies` of one pose (22,)."""
+    def penalty(self, poses: npt.ArrayLike) -> npt.NDArray[np.float64]:
+        """The rest-pose penalty of each of ``poses`` (N, 22) (:func:`rest_pose_penalty`
+        with ``config.pose_prior_weight``): what a pose's discrepancy is charged when
+        poses compete. (N,)."""
 
 @final
-class _PoseTracker:
+class PoseTracker:
+    """Pose through a depth video: each :meth:`update` starts from the previous pose.
+
+    A tracked frame starts from the previous pose moved on by a damped velocity, with a
+    prior toward that prediction. When the fit explains too little of the person or the
+    depth much worse than lately, the track is lost and the template search runs (the
+    tracked pose among its starts). With ``config.recheck_every`` > 0 the search also
+    runs every that many frames and the track switches when it finds a clearly better
+    pose.
+
+    With ``config.learn_background`` and no ``background``, the tracker learns the
+    scene's static background over the frames, outside the person's mask, and segments
+    the person in front of it once enough is known (``result.segmentation_method ==
+    "learned"``; the learning's time is ``timings["background"]``). What it learned is
+    kept across :meth:`reset` (the same camera and scene).
+
+    Parameters
+    ----------
+    camera, model, templates, config, background
+        As for :class:`PoseEstimator`. Without a ``model`` the body's size is found on
+        the first frame and the shape is calibrated from there.
+    calibrate
+        Fit the subject's body shape over the first usable frames (default None: when
+        no ``model`` is given; a given model is taken as the subject's known shape).
+
+    Raises
+    ------
+    InvalidTypeError
+        An argument of the wrong type (the message names it).
+    InvalidInputError
+        A background of the wrong size or content.
+    """
+
     def __new__(
         cls,
         camera: Camera,
-        templates: _TemplateDatabase,
         *,
         model: BodyModel | None = None,
+        templates: TemplateDatabase | None = None,
         config: PipelineConfig | None = None,
         background: npt.NDArray[np.generic] | None = None,
         calibrate: bool | None = None,
-    ) -> _PoseTracker: ...
+    ) -> PoseTracker: ...
     def update(
         self, depth: npt.NDArray[np.generic], mask: npt.NDArray[np.generic] | None = None
-    ) -> PoseResult: ...
-    def reset(self, shape: bool = ...) -> None: ...
-    def start_from(self, pose: npt.NDArray[np.generic]) -> None: ...
-    @property
-    def model(self) -> BodyModel: ...
-    @property
-    def base_model(self) -> BodyModel: ...
-    @property
-    def config(self) -> PipelineConfig: ...
-    @property
-    def camera(self) -> Camera: ...
-    @property
-    def lost_frames(self) -> int: ...
-    @property
-    def switches(self) -> int: ...
-    @property
-    def calibrating(self) -> bool: ...
-    @property
-    def calibrated(self) -> bool: ...
-    @property
-    def shape_factors(self) -> npt.NDArray[np.float64] | None: ...
-    @property
-    def calibration(self) -> ShapeFitResult | None: ...
-    @property
-    def calibration_error(self) -> str | None: ...
-    @property
-    def calibration_frame(self) -> int | None: ...
+    ) -> PoseResult:
+        """The pose of the next frame. While calibrating, a usable frame may be kept for
+        the shape calibration, and the frame that completes it runs it
+        (``timings["calibration"]``).
 
-@final
-class _StereoPose:
+        Parameters
+        ----------
+        depth
+            (H, W) float metres or uint16 millimetres; 0 or NaN = no reading.
+        mask
+            (H, W) bool: the person's pixels (default: found automatically).
+
+        Returns
+        -------
+        PoseResult
+            The pose; its ``source`` says whether it was tracked or searched.
+
+        Raises
+        ------
+        NoBodyError
+            No person in the frame.
+        InvalidInputError
+            A bad argument.
+        """
+    def reset(self, shape: bool = False) -> None:
+        """Forgets the track. The calibrated shape is kept (the same subject) unless
+        ``shape`` is true: then the starting model is restored and calibrated again."""
+    def start_from(self, pose: npt.NDArray[np.generic]) -> None:
+        """Starts the track from a known pose (22,): the next :meth:`update` refines it
+        instead of searching the templates."""
+    @property
+    def camera(self) -> Camera:
+        """The camera the frames come from."""
+    @property
+    def model(self) -> BodyModel:
+        """The model tracked with (the calibrated one once calibrated)."""
+    @property
+    def base_model(self) -> BodyModel:
+        """The model the tracker started with."""
+    @property
+    def config(self) -> PipelineConfig:
+        """The settings."""
+    @property
+    def lost_frames(self) -> int:
+        """Frames on which the track was lost and the template search ran."""
+    @property
+    def switches(self) -> int:
+        """Times a re-check switched the track to a better pose."""
+    @property
+    def calibrating(self) -> bool:
+        """Whether the tracker is still collecting frames to calibrate the shape."""
+    @property
+    def calibrated(self) -> bool:
+        """Whether the shape calibration ran and succeeded."""
+    @property
+    def shape_factors(self) -> npt.NDArray[np.float64] | None:
+        """The calibrated shape factors (12,) relative to :attr:`base_model`."""
+    @property
+    def calibration(self) -> ShapeFitResult | None:
+        """The shape fit of the calibration (None before or when it failed)."""
+    @property
+    def calibration_error(self) -> str | None:
+        """Why the calibration failed, else None."""
+    @property
+    def calibration_frame(self) -> int | None:
+        """Frames :meth:`update` had been given when the calibration ran."""
+
+@disjoint_base
+class StereoPoseTracker:
+    """Pose through a video of rectified stereo pairs.
+
+    Parameters
+    ----------
+    camera
+        The left camera (its size and intrinsics; ``fx`` is the focal length of the
+        disparity). Left pixel ``x`` matches right pixel ``x - d``.
+    baseline
+        Distance between the camera centres, metres.
+    doffs
+        The x-offset of the right principal point from the left one, pixels
+        (Middlebury's ``doffs``; 0 for a pair rectified to a common principal point).
+    model, templates, config, calibrate
+        As for :class:`PoseTracker`.
+    background
+        The pair ``(left, right)`` of the empty scene, for background subtraction
+        (optional: without it the person is found automatically).
+    background_depth
+        Or the empty scene's depth (H, W) in metres.
+    max_disparity
+        The largest disparity searched (default: the whole line).
+    fattening
+        Remove the band of background pixels along the person's outline that take the
+        person's disparity (default True).
+    disparity_tolerance
+        Disparity error (pixels) the segmentation tolerates on a floor, a wall or
+        against the background (default 1).
+    disparity_sigma
+        The matched disparity's standard deviation in pixels (default 0.25, this
+        matcher's on textured surfaces): depth noise σ_Z = Z²·disparity_sigma/(f·B)
+        grows with depth, and the tracker's lost test allows for the discrepancy it
+        adds to a good fit's. 0: no noise model.
+    weigh_points
+        Weigh each point in the fit by how precisely its depth is known,
+        1/(σ² + σ_Z²) (default False: every point alike).
+
+    Raises
+    ------
+    InvalidInputError
+        A bad argument.
+    """
+
     def __new__(
         cls,
         camera: Camera,
-        templates: _TemplateDatabase,
         baseline: float,
         *,
-        doffs: float = ...,
+        doffs: float = 0.0,
         model: BodyModel | None = None,
+        templates: TemplateDatabase | None = None,
         config: PipelineConfig | None = None,
         background: tuple[npt.NDArray[np.generic], npt.NDArray[np.generic]] | None = None,
         background_depth: npt.NDArray[np.generic] | None = None,
-        track: bool = ...,
         calibrate: bool | None = None,
         max_disparity: int | None = None,
-        fattening: bool = ...,
-        disparity_tolerance: float = ...,
-        disparity_sigma: float = ...,
-        weigh_points: bool = ...,
-    ) -> _StereoPose: ...
+        fattening: bool = True,
+        disparity_tolerance: float = 1.0,
+        disparity_sigma: float = 0.25,
+        weigh_points: bool = False,
+    ) -> Self: ...
     def update(
         self,
         left: npt.NDArray[np.generic],
         right: npt.NDArray[np.generic],
         mask: npt.NDArray[np.generic] | None = None,
-    ) -> PoseResult: ...
-    def reset(self, shape: bool = ...) -> None: ...
+    ) -> PoseResult:
+        """The pose of the next pair.
+
+        Parameters
+        ----------
+        left, right
+            The rectified images, gray (H, W) or colour (H, W, 3), any numeric dtype.
+        mask
+            (H, W) bool: the person's pixels in the left image (default: found).
+
+        Returns
+        -------
+        PoseResult
+            Its ``timings`` begin with the stereo stage (``stereo``); the pair's
+            disparity is :attr:`disparity`.
+
+        Raises
+        ------
+        NoBodyError
+            No person in the pair's depth.
+        InvalidInputError
+            A bad argument.
+        """
+    def reset(self, shape: bool = False) -> None:
+        """Forgets the video (the track and the last disparity); the calibrated shape
+        too when ``shape`` is true."""
     @property
-    def disparity(self) -> npt.NDArray[np.float32] | None: ...
+    def disparity(self) -> npt.NDArray[np.float32] | None:
+        """The last pair's disparity (H, W) in pixels, NaN unmatched; None before the
+        first pair."""
     @property
-    def baseline(self) -> float: ...
+    def camera(self) -> Camera:
+        """The left camera."""
     @property
-    def doffs(self) -> float: ...
+    def baseline(self) -> float:
+        """Distance between the camera centres, metres."""
     @property
-    def tracking(self) -> bool: ...
+    def doffs(self) -> float:
+        """The x-offset of the right principal point from the left one, pixels."""
     @property
-    def model(self) -> BodyModel: ...
+    def model(self) -> BodyModel:
+        """The model fitted with (the calibrated one once calibrated)."""
     @property
-    def config(self) -> PipelineConfig: ...
+    def config(self) -> PipelineConfig:
+        """The settings, adapted to the stereo depth's noise."""
     @property
-    def camera(self) -> Camera: ...
+    def shape_factors(self) -> npt.NDArray[np.float64] | None:
+        """The calibrated shape factors (12,), when tracking and calibrated."""
     @property
-    def shape_factors(self) -> npt.NDArray[np.float64] | None: ...
-    @property
-    def calibration_error(self) -> str | None: ...
+    def calibration_error(self) -> str | None:
+        """Why the shape calibration failed, else None."""
+
+@final
+class StereoPoseEstimator(StereoPoseTracker):
+    """Pose of each rectified pair from scratch: the parameters of
+    :class:`StereoPoseTracker` (``calibrate`` has no effect); :meth:`update` takes a
+    pair and forgets it."""
+
+    def estimate(
+        self,
+        left: npt.NDArray[np.generic],
+        right: npt.NDArray[np.generic],
+        mask: npt.NDArray[np.generic] | None = None,
+    ) -> PoseResult:
+        """The pose of one pair (as :meth:`StereoPoseTracker.update`)."""
 
 def swap_limbs(pose: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]:
     """The left/right-swapped pose: right and left limb angles exchanged, the lateral

@@ -40,9 +40,9 @@ use numpy::{
     Element, IntoPyArray, PyArrayDescrMethods, PyArrayDyn, PyArrayMethods, PyUntypedArray,
     PyUntypedArrayMethods,
 };
-use pyo3::exceptions::PyOverflowError;
+use pyo3::exceptions::{PyOverflowError, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyFloat};
+use pyo3::types::{PyBool, PyDict, PyFloat, PyList, PyMapping, PyString, PyTuple};
 use pyo3::{PyClass, PyTypeInfo};
 use std::convert::Infallible;
 use std::path::PathBuf;
@@ -59,8 +59,8 @@ pub const MAX_ARRAY_ELEMENTS: usize = 1 << 26;
 /// built for it): 2^30 bytes.
 pub const MAX_RESULT_BYTES: usize = 1 << 30;
 
-/// A numeric argument as an error shows it: the type's name.
-fn type_name(obj: &Bound<PyAny>) -> String {
+/// An argument as an error shows it: the name of its type.
+pub fn type_name(obj: &Bound<PyAny>) -> String {
     obj.get_type()
         .name()
         .map(|n| n.to_string())
@@ -317,6 +317,15 @@ impl Flag {
             .clone()
             .map_err(|t| wrong_type(name, "True or False", &t))
     }
+
+    /// An optional flag (None: `None`), or an error naming `name`.
+    pub fn optional(flag: Option<&Flag>, name: &str) -> PyResult<Option<bool>> {
+        flag.map(|f| {
+            f.0.clone()
+                .map_err(|t| wrong_type(name, "True, False or None", &t))
+        })
+        .transpose()
+    }
 }
 
 /// A `str` argument.
@@ -499,12 +508,58 @@ pub fn body_model(obj: Option<&Bound<PyAny>>, name: &str) -> PyResult<crate::bod
     }
 }
 
-/// An optional `depthpose.FitConfig` argument (None: the defaults).
+/// An optional `depthpose.FitConfig` argument: a FitConfig, a mapping of its keyword
+/// arguments, or None (the defaults).
 pub fn fit_config(obj: Option<&Bound<PyAny>>, name: &str) -> PyResult<crate::fit::FitConfig> {
-    match obj {
-        None => Ok(crate::fit::FitConfig::default()),
-        Some(c) => Ok(object::<PyFitConfig>(c, name, "a depthpose.FitConfig or None")?.to_rust()?),
+    let Some(obj) = obj.filter(|c| !c.is_none()) else {
+        return Ok(crate::fit::FitConfig::default());
+    };
+    if obj.is_instance_of::<PyFitConfig>() {
+        return Ok(object::<PyFitConfig>(obj, name, "a FitConfig")?.to_rust()?);
     }
+    let Ok(mapping) = obj.cast::<PyMapping>() else {
+        return Err(wrong_type(
+            name,
+            "a FitConfig, a dict or None",
+            &type_name(obj),
+        ));
+    };
+    let py = obj.py();
+    let settings = PyDict::new(py);
+    settings.update(mapping)?;
+    if let Some(key) = settings
+        .keys()
+        .iter()
+        .find(|k| !k.is_instance_of::<PyString>())
+    {
+        return Err(PyErr::new::<InvalidTypeError, _>(format!(
+            "{name}: keys must be setting names, got {}",
+            key.repr()?
+        )));
+    }
+    let config = py
+        .get_type::<PyFitConfig>()
+        .call((), Some(&settings))
+        .map_err(|e| {
+            if e.is_instance_of::<PyTypeError>(py) && !e.is_instance_of::<InvalidTypeError>(py) {
+                PyErr::new::<InvalidTypeError, _>(format!("{name}: {}", e.value(py)))
+            } else {
+                e
+            }
+        })?;
+    Ok(object::<PyFitConfig>(&config, name, "a FitConfig")?.to_rust()?)
+}
+
+/// A list or tuple as `numpy.asarray` reads it (a ragged one is refused, naming
+/// `name`); anything else as it is, for the array readers to check.
+pub fn array_like<'py>(obj: &Bound<'py, PyAny>, name: &str) -> PyResult<Bound<'py, PyAny>> {
+    if !(obj.is_instance_of::<PyList>() || obj.is_instance_of::<PyTuple>()) {
+        return Ok(obj.clone());
+    }
+    obj.py()
+        .import("numpy")?
+        .call_method1("asarray", (obj,))
+        .map_err(|_| invalid(name, "not a rectangular array of numbers"))
 }
 
 // ---- arrays ------------------------------------------------------------------------

@@ -2,8 +2,8 @@
 
 use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::convert::{
-    body_model, bool_array, camera as camera_arg, check_fit_points, depth_array, f64_array,
-    fit_config, invalid, object, to_numpy, wrong_type, Flag, Int, Real, Text,
+    array_like, body_model, bool_array, camera as camera_arg, check_fit_points, depth_array,
+    f64_array, fit_config, invalid, object, to_numpy, wrong_type, Flag, Int, Real, Text,
 };
 use super::keywords::keywords;
 use super::native;
@@ -609,7 +609,7 @@ impl FitArgs {
         check_fit_points(&d.data, mask.as_deref(), 0, "depth")?;
         let prior = match &options.prior {
             Some(p) => {
-                let prior = pose_arg(p, "prior")?;
+                let prior = pose_arg(&array_like(p, "prior")?, "prior")?;
                 if !(prior_weight.is_finite() && (0.0..=MAX_PRIOR_WEIGHT).contains(&prior_weight)) {
                     return Err(invalid(
                         "prior_weight",
@@ -684,7 +684,7 @@ fn fit_pose<'py>(
 ) -> PyResult<PyFitResult> {
     let options = FitOptions::parse("fit_pose", options)?;
     let args = FitArgs::parse(depth, camera, &options)?;
-    let init = pose_arg(init_pose, "init_pose")?;
+    let init = pose_arg(&array_like(init_pose, "init_pose")?, "init_pose")?;
     let resume = resume.map(|r| fit_result(r, "resume")).transpose()?;
     if let Some(r) = &resume {
         args.check_same_image(r, "resume")?;
@@ -719,7 +719,7 @@ fn fit_poses<'py>(
 ) -> PyResult<Vec<PyFitResult>> {
     let options = FitOptions::parse("fit_poses", options)?;
     let args = FitArgs::parse(depth, camera, &options)?;
-    let inits = poses_arg(init_poses, "init_poses")?;
+    let inits = poses_arg(&array_like(init_poses, "init_poses")?, "init_poses")?;
     if inits.len() > MAX_START_POSES {
         return Err(super::convert::too_large(
             "init_poses",
@@ -810,7 +810,7 @@ fn pose_from_joints<'py>(
     init: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<F64Array<'py>> {
     let model = body_model(model, "model")?;
-    let a = f64_array(joints, "joints", Some(2), false)?;
+    let a = f64_array(&array_like(joints, "joints")?, "joints", Some(2), false)?;
     if a.shape != [NUM_JOINTS, 3] {
         return Err(invalid(
             "joints",
@@ -833,7 +833,9 @@ fn pose_from_joints<'py>(
             ),
         ));
     }
-    let init = init.map(|p| pose_arg(p, "init")).transpose()?;
+    let init = init
+        .map(|p| pose_arg(&array_like(p, "init")?, "init"))
+        .transpose()?;
     let j: [Vector3<f64>; NUM_JOINTS] =
         std::array::from_fn(|k| Vector3::new(a.data[3 * k], a.data[3 * k + 1], a.data[3 * k + 2]));
     let pose = native(py, || fit::pose_from_joints(&model, &j, init.as_ref()))?;

@@ -1,16 +1,23 @@
-//! Pose from rectified stereo pairs for Python: the native class that
-//! `depthpose.StereoPoseEstimator` / `depthpose.StereoPoseTracker` wrap. Each `update`
+//! Pose from rectified stereo pairs for Python: `StereoPoseTracker` and its subclass
+//! `StereoPoseEstimator` (documented in `python/depthpose/_core.pyi`). Each `update`
 //! (matching, depth, pose) is one native call with the GIL released.
 
 use super::body::PyBodyModel;
 use super::camera::PyCamera;
-use super::convert::{bool_array, depth_array, invalid, to_numpy, Flag, Int, Real};
+use super::convert::{
+    bool_array, depth_array, invalid, to_numpy, type_name, wrong_type, Flag, Int, Real,
+};
+use super::keywords::keywords;
 use super::native;
-use super::pipeline::{EstimatorArgs, EstimatorParts, PyPipelineConfig, PyPoseResult};
+use super::pipeline::{
+    calibrate_arg, EstimatorArgs, EstimatorParts, PyPipelineConfig, PyPoseResult,
+};
 use super::stereo::gray_image;
+use crate::error::brief;
 use crate::pipeline::{StereoDepth, StereoDepthConfig, StereoPipeline, StereoRig, Tracker};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
 
 /// A gray pair (H, W) each, checked against each other and the camera.
 fn pair(
@@ -34,17 +41,54 @@ fn pair(
     Ok((l.data, r.data))
 }
 
-/// The stereo stage's settings from the keyword arguments.
-struct StereoArgs {
-    max_disparity: Option<Int>,
-    fattening: Flag,
-    disparity_tolerance: Real,
-    disparity_sigma: Real,
-    weigh_points: Flag,
+/// The empty scene's pair `(left, right)`: a tuple or list of two images.
+fn background_pair<'py>(
+    obj: &Bound<'py, PyAny>,
+) -> PyResult<(Bound<'py, PyAny>, Bound<'py, PyAny>)> {
+    let sequence = obj.is_instance_of::<PyTuple>() || obj.is_instance_of::<PyList>();
+    if !sequence || obj.len()? != 2 {
+        return Err(wrong_type(
+            "background",
+            "the empty scene's pair (left, right)",
+            &type_name(obj),
+        ));
+    }
+    Ok((obj.get_item(0)?, obj.get_item(1)?))
 }
 
-impl StereoArgs {
-    fn config(&self) -> PyResult<StereoDepthConfig> {
+/// The distance between the camera centres: finite and positive.
+fn baseline_arg(baseline: &Real) -> PyResult<f64> {
+    let b = baseline.get("baseline")?;
+    if !(b.is_finite() && b > 0.0) {
+        return Err(invalid(
+            "baseline",
+            format!("must be a finite number in (0, inf], got {}", brief(b)),
+        ));
+    }
+    Ok(b)
+}
+
+keywords! {
+    /// The keyword arguments of `StereoPoseTracker` and `StereoPoseEstimator`.
+    struct StereoKeywords<'py> {
+        doffs: Real = Real::new(0.0),
+        model: Option<Bound<'py, PyAny>> = None,
+        templates: Option<Bound<'py, PyAny>> = None,
+        config: Option<Bound<'py, PyAny>> = None,
+        background: Option<Bound<'py, PyAny>> = None,
+        background_depth: Option<Bound<'py, PyAny>> = None,
+        calibrate: Option<Flag> = None,
+        max_disparity: Option<Int> = None,
+        fattening: Flag = Flag::new(true),
+        disparity_tolerance: Real = Real::new(1.0),
+        disparity_sigma: Real = Real::new(0.25),
+        weigh_points: Flag = Flag::new(false),
+    }
+}
+
+impl StereoKeywords<'_> {
+    /// The stereo stage's settings.
+    fn stereo_config(&self) -> PyResult<StereoDepthConfig> {
         let mut c = StereoDepthConfig::default();
         c.matching.max_disparity = self
             .max_disparity
@@ -61,76 +105,54 @@ impl StereoArgs {
     }
 }
 
-/// Pose from rectified pairs, from scratch or tracked (see `depthpose.StereoPoseTracker`).
-#[pyclass(name = "_StereoPose", module = "depthpose._core")]
-pub struct PyStereoPose {
+/// Pose through a video of rectified stereo pairs.
+#[pyclass(name = "StereoPoseTracker", module = "depthpose._core", subclass)]
+pub struct PyStereoPoseTracker {
     inner: StereoPipeline,
 }
 
-#[pymethods]
-impl PyStereoPose {
-    #[new]
-    #[pyo3(signature = (camera, templates, baseline, *, doffs=Real::new(0.0), model=None, config=None,
-        background=None, background_depth=None, track=Flag::new(true), calibrate=None, max_disparity=None,
-        fattening=Flag::new(true), disparity_tolerance=Real::new(1.0),
-        disparity_sigma=Real::new(0.25), weigh_points=Flag::new(false)))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        py: Python<'_>,
+impl PyStereoPoseTracker {
+    /// The pipeline of `camera`, `baseline` and the keyword arguments: tracking, or
+    /// estimating each pair from scratch.
+    fn build(
         camera: &Bound<'_, PyAny>,
-        templates: &Bound<'_, PyAny>,
-        baseline: Real,
-        doffs: Real,
-        model: Option<&Bound<'_, PyAny>>,
-        config: Option<&Bound<'_, PyAny>>,
-        background: Option<(Bound<'_, PyAny>, Bound<'_, PyAny>)>,
-        background_depth: Option<&Bound<'_, PyAny>>,
-        track: Flag,
-        calibrate: Option<Flag>,
-        max_disparity: Option<Int>,
-        fattening: Flag,
-        disparity_tolerance: Real,
-        disparity_sigma: Real,
-        weigh_points: Flag,
+        baseline: &Real,
+        options: &StereoKeywords<'_>,
+        track: bool,
     ) -> PyResult<Self> {
-        let track = track.get("track")?;
-        let calibrate = match &calibrate {
-            Some(c) => c.get("calibrate")?,
-            None => model.is_none(),
-        };
+        let calibrate = calibrate_arg(options.calibrate.as_ref(), options.model.as_ref())?;
         let mut parts = EstimatorParts::of(&EstimatorArgs {
             camera,
-            templates,
-            model,
-            config,
-            background: None,
+            model: options.model.as_ref(),
+            templates: options.templates.as_ref(),
+            config: options.config.as_ref(),
         })?;
+        let baseline = baseline_arg(baseline)?;
+        let background = options
+            .background
+            .as_ref()
+            .map(background_pair)
+            .transpose()?;
         let rig = StereoRig {
-            baseline: baseline.get("baseline")?,
-            doffs: doffs.get("doffs")?,
+            baseline,
+            doffs: options.doffs.get("doffs")?,
         };
-        let stereo_config = StereoArgs {
-            max_disparity,
-            fattening,
-            disparity_tolerance,
-            disparity_sigma,
-            weigh_points,
-        }
-        .config()?;
-        let mut stereo = StereoDepth::new(&parts.camera, rig, stereo_config)?;
+        let mut stereo = StereoDepth::new(&parts.camera, rig, options.stereo_config()?)?;
         parts.config.segment = stereo.segment_config(&parts.config.segment);
         parts.config.fit = stereo.fit_config(&parts.config.fit);
         let bg = background
             .map(|(l, r)| pair(&parts.camera, &l, &r, ["background[0]", "background[1]"]))
             .transpose()?;
-        let bg_depth = match (bg, background_depth) {
+        let bg_depth = match (bg, &options.background_depth) {
             (Some(_), Some(_)) => {
                 return Err(invalid(
                     "background_depth",
                     "give either the empty scene's pair (background) or its depth, not both",
                 ))
             }
-            (Some((l, r)), None) => Some(native(py, || stereo.frame(&l, &r, false))?.depth),
+            (Some((l, r)), None) => {
+                Some(native(camera.py(), || stereo.frame(&l, &r, false))?.depth)
+            }
             (None, Some(d)) => {
                 let d = depth_array(d, "background_depth")?;
                 parts
@@ -146,7 +168,26 @@ impl PyStereoPose {
         } else {
             StereoPipeline::estimating(stereo, estimator)
         };
-        Ok(PyStereoPose { inner })
+        Ok(PyStereoPoseTracker { inner })
+    }
+}
+
+#[pymethods]
+impl PyStereoPoseTracker {
+    // The signature of both stereo classes.
+    #[new]
+    #[pyo3(signature = (camera, baseline, **options),
+           text_signature = "(camera, baseline, *, doffs=0.0, model=None, templates=None, \
+                             config=None, background=None, background_depth=None, \
+                             calibrate=None, max_disparity=None, fattening=True, \
+                             disparity_tolerance=1.0, disparity_sigma=0.25, weigh_points=False)")]
+    fn new(
+        camera: &Bound<'_, PyAny>,
+        baseline: Real,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let options = StereoKeywords::parse("StereoPoseTracker.__new__", options)?;
+        Self::build(camera, &baseline, &options, true)
     }
 
     #[pyo3(signature = (left, right, mask=None))]
@@ -169,13 +210,12 @@ impl PyStereoPose {
         })
     }
 
-    #[pyo3(signature = (shape=Flag::new(false)))]
+    #[pyo3(signature = (shape=Flag::new(false)), text_signature = "($self, shape=False)")]
     fn reset(&mut self, shape: Flag) -> PyResult<()> {
         self.inner.reset(shape.get("shape")?);
         Ok(())
     }
 
-    /// The last pair's disparity (H, W), NaN unmatched; None before the first pair.
     #[getter]
     fn disparity<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f32>>>> {
         let cam = self.inner.estimator().camera();
@@ -185,16 +225,18 @@ impl PyStereoPose {
             .transpose()
     }
     #[getter]
+    fn camera(&self) -> PyCamera {
+        PyCamera {
+            inner: *self.inner.estimator().camera(),
+        }
+    }
+    #[getter]
     fn baseline(&self) -> f64 {
         self.inner.stereo().rig().baseline
     }
     #[getter]
     fn doffs(&self) -> f64 {
         self.inner.stereo().rig().doffs
-    }
-    #[getter]
-    fn tracking(&self) -> bool {
-        self.inner.tracker().is_some()
     }
     #[getter]
     fn model(&self) -> PyBodyModel {
@@ -212,13 +254,6 @@ impl PyStereoPose {
             inner: self.inner.estimator().config().clone(),
         }
     }
-    #[getter]
-    fn camera(&self) -> PyCamera {
-        PyCamera {
-            inner: *self.inner.estimator().camera(),
-        }
-    }
-    /// The calibrated shape factors (12,) of a tracking pipeline, else None.
     #[getter]
     fn shape_factors<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyArrayDyn<f64>>>> {
         self.inner
@@ -238,7 +273,43 @@ impl PyStereoPose {
     }
 }
 
+/// Pose of each rectified stereo pair from scratch.
+#[pyclass(name = "StereoPoseEstimator", module = "depthpose._core", extends = PyStereoPoseTracker)]
+pub struct PyStereoPoseEstimator;
+
+#[pymethods]
+impl PyStereoPoseEstimator {
+    // The signature of both stereo classes.
+    #[new]
+    #[pyo3(signature = (camera, baseline, **options),
+           text_signature = "(camera, baseline, *, doffs=0.0, model=None, templates=None, \
+                             config=None, background=None, background_depth=None, \
+                             calibrate=None, max_disparity=None, fattening=True, \
+                             disparity_tolerance=1.0, disparity_sigma=0.25, weigh_points=False)")]
+    fn new(
+        camera: &Bound<'_, PyAny>,
+        baseline: Real,
+        options: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<PyClassInitializer<Self>> {
+        let options = StereoKeywords::parse("StereoPoseEstimator.__new__", options)?;
+        let base = PyStereoPoseTracker::build(camera, &baseline, &options, false)?;
+        Ok(PyClassInitializer::from(base).add_subclass(PyStereoPoseEstimator))
+    }
+
+    #[pyo3(signature = (left, right, mask=None))]
+    fn estimate(
+        mut slf: PyRefMut<'_, Self>,
+        py: Python<'_>,
+        left: &Bound<'_, PyAny>,
+        right: &Bound<'_, PyAny>,
+        mask: Option<&Bound<'_, PyAny>>,
+    ) -> PyResult<PyPoseResult> {
+        slf.as_super().update(py, left, right, mask)
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_class::<PyStereoPose>()?;
+    m.add_class::<PyStereoPoseTracker>()?;
+    m.add_class::<PyStereoPoseEstimator>()?;
     Ok(())
 }
