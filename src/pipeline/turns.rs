@@ -6,18 +6,21 @@
 //! wrong way: the body facing away instead of toward the camera, or its near side read
 //! as its far side. When a fit explains the depth badly ([`Estimator::explains_badly`]),
 //! the fitted body is turned about its own vertical axis by every other eighth of a
-//! turn, each with its limbs as fitted and exchanged, and each gets a short EM; the
-//! refit that ranks best replaces the fit when it ranks better.
+//! turn, each with its limbs as fitted and exchanged, and it is also tried with only its
+//! arms and only its legs exchanged (a raised arm read as the other one); each gets a
+//! short EM, and the refit that ranks best replaces the fit when it ranks better.
 
 use super::estimator::{first_min, Estimator, Frame};
 use super::hypotheses::{swap_limbs, turned};
 use crate::body::Pose;
 use crate::error::Result;
+use crate::fit::start::limbs_swapped;
 use crate::fit::FitResult;
 use std::f64::consts::FRAC_PI_4;
 
 /// `pose` turned about its own vertical axis by every eighth of a turn, each with its
-/// limbs as they are and exchanged ([`swap_limbs`]), but for `pose` itself: 15 poses.
+/// limbs as they are and exchanged ([`swap_limbs`]), but for `pose` itself; then `pose`
+/// with only its arms and with only its legs exchanged ([`limbs_swapped`]): 17 poses.
 pub fn turned_starts(pose: &Pose) -> Vec<Pose> {
     (0..8)
         .flat_map(|k| {
@@ -25,6 +28,10 @@ pub fn turned_starts(pose: &Pose) -> Vec<Pose> {
             [t, swap_limbs(&t)]
         })
         .skip(1)
+        .chain([
+            limbs_swapped(pose, false, true),
+            limbs_swapped(pose, true, false),
+        ])
         .collect()
 }
 
@@ -70,11 +77,13 @@ mod tests {
     fn turned_starts_are_the_other_eighths_of_a_turn_with_limbs_as_they_are_and_exchanged() {
         let pose = turned(&walking(&BodyModel::default(), 0.7), 0.3);
         let starts = turned_starts(&pose);
-        assert_eq!(starts.len(), 15);
+        assert_eq!(starts.len(), 17);
+        assert_eq!(starts[15], limbs_swapped(&pose, false, true));
+        assert_eq!(starts[16], limbs_swapped(&pose, true, false));
         let r = root_rotation(&pose);
         // Entry j of (turn k, limbs exchanged) in order is (j / 2, j odd); entry 0, the
         // pose itself, is left out.
-        for (i, s) in starts.iter().enumerate() {
+        for (i, s) in starts[..15].iter().enumerate() {
             let j = i + 1;
             let (k, swapped) = (j / 2, j % 2 == 1);
             // The turn relative to the body is about its own vertical axis.
