@@ -30,6 +30,7 @@ __all__ = [
     "MAX_LABELS",
     "MAX_RESULT_BYTES",
     "MIN_DEPTH_SCALE",
+    "MOTIONS",
     "MaxflowGraph",
     "MissingFileError",
     "NoBodyError",
@@ -46,8 +47,6 @@ __all__ = [
     "TemplateDatabase",
     "__version__",
     "_euler_zxy",
-    "_rotation_matrix",
-    "_rotation_vector",
     "alpha_beta_swap",
     "alpha_expansion",
     "crf_energy",
@@ -59,7 +58,9 @@ __all__ = [
     "foreground_mask",
     "grid_edges",
     "label_all_pixels",
+    "make_sequence",
     "mirror_view",
+    "motion_pose",
     "pixel_graph",
     "pose_from_joints",
     "read_depth_image",
@@ -344,8 +345,6 @@ def surface_context(
         (N, 2) float32 sample positions normalised to the body's extent.
     """
 
-def _rotation_matrix(vector: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
-def _rotation_vector(matrix: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
 def _euler_zxy(matrix: npt.ArrayLike) -> tuple[float, float, float]: ...
 
 @final
@@ -1764,3 +1763,77 @@ def mirror_view(pose: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]:
 
 def rest_pose_penalty(poses: npt.NDArray[np.generic], weight: float) -> npt.NDArray[np.float64]:
     """``weight`` × Σ θ² over the 14 limb angles of each pose (N, 22) → (N,)."""
+
+# ---- synthetic sequences --------------------------------------------------------------
+MOTIONS: tuple[str, ...]
+"""The motions :func:`make_sequence` renders: "walk", "wave", "squat", "turn",
+"arm_raise"."""
+
+def motion_pose(motion: str, t: float) -> npt.NDArray[np.float64]:
+    """The joint angles (22,) of ``motion`` at phase ``t`` (modulo 1); the root parts
+    are zero."""
+
+def make_sequence(
+    motion: str = "wave",
+    frames: int = 30,
+    camera: Camera | None = None,
+    *,
+    distance: float = 3.0,
+    view_deg: float = 0.0,
+    noise: float = 1.0,
+    seed: int = 0,
+    height: float = 1.75,
+    fps: float = 30.0,
+    cycles: float = 1.0,
+    camera_height: float = 1.2,
+    tilt_deg: float = 5.0,
+    wall_distance: float | None = None,
+) -> dict[str, npt.NDArray[Any]]:
+    """A synthetic depth sequence of the body model in a room, through a Kinect-v1-like
+    sensor. The same seed gives the same sequence.
+
+    Parameters
+    ----------
+    motion
+        One of :data:`MOTIONS`.
+    frames
+        Number of frames, 1..10000.
+    camera
+        The depth camera (default: ``Camera.itop()``, 320×240).
+    distance
+        The hip centre's distance ahead at the start (m), 0.8..8.
+    view_deg
+        The subject's yaw (degrees): 0 faces the camera, +90 turns the left side
+        toward it.
+    noise
+        Sensor noise scale, 0..10 (0: the exact render, millimetre-rounded).
+    seed
+        Seed of the sensor noise.
+    height
+        The subject's height (m).
+    fps
+        Frame rate recorded with the sequence.
+    cycles
+        Motion cycles over the sequence.
+    camera_height
+        The camera's height above the floor (m).
+    tilt_deg
+        The camera's downward pitch (degrees).
+    wall_distance
+        The back wall's distance (m), at least 0.5 m behind the subject (default:
+        1.5 m behind).
+
+    Returns
+    -------
+    dict
+        ``depth`` (T, H, W) uint16 millimetres, ``background`` (H, W) uint16 (the empty
+        room), ``mask`` (T, H, W) bool (the person), ``joints`` (T, 15, 3) float32
+        (camera frame), ``intrinsics`` (4,) [fx, fy, cx, cy], ``joint_names``, ``fps``,
+        ``meta`` (the settings as JSON), ``poses`` (T, 22) and ``labels`` (T, H, W)
+        int16 (the body part of each person pixel, −1 elsewhere).
+
+    Raises
+    ------
+    InvalidInputError
+        A setting out of range (the message names it).
+    """
