@@ -2,8 +2,9 @@
 //!
 //! One module per pipeline stage (see `DESIGN.md` in the shared folder and the README):
 //! camera → cloud (points, normals, neighbours, foreground) → stereo → body model →
-//! render → descriptor/templates → graphcut → fit → pipeline. The PyO3 bindings live in
-//! `python` behind the `python` feature; algorithms never live there.
+//! render → descriptor/templates → graphcut → fit → pipeline; `synth` renders synthetic
+//! sequences to test them on. The PyO3 bindings live in `python` behind the `python`
+//! feature; algorithms never live there.
 
 /// Defines `fn $name(args) { body }` twice over: compiled for AVX2, used where the CPU
 /// has it and `DEPTHPOSE_NO_AVX2` is not set ([`cpu::avx2`], decided once per process),
@@ -48,6 +49,7 @@ pub mod render;
 pub mod segment;
 mod simd;
 pub mod stereo;
+pub mod synth;
 pub mod templates;
 mod union_find;
 

@@ -242,7 +242,7 @@ def test_mesh_resolution_is_bounded():
         with pytest.raises(depthpose.DepthPoseError, match="rings/sectors"):
             m.superquadric_meshes(m.neutral_pose(), rings, sectors)
         with pytest.raises(depthpose.DepthPoseError, match="rings/sectors"):
-            _core._TemplateDatabase.template_mesh(0, None, rings=rings, sectors=sectors)
+            _core.TemplateDatabase.template_mesh(0, None, rings=rings, sectors=sectors)
     v, f = m.superquadric_meshes(m.neutral_pose(), 1000, 3)[0]
     assert len(v) > 0 and len(f) > 0
 

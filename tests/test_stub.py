@@ -49,8 +49,8 @@ def _signature_defaults(f):
 
 def test_runtime_signatures_show_the_defaults_the_native_code_uses():
     assert _core.FitConfig(**_signature_defaults(_core.FitConfig)) == _core.FitConfig()
-    settings = _core._TemplateDatabase.settings
-    assert settings(**_signature_defaults(settings))[0] == settings()[0]
+    settings = _core.TemplateDatabase._settings_hash
+    assert settings(**_signature_defaults(settings)) == settings()
     camera = _core.Camera.kinect_v1_qvga()
     pose = _core.BodyModel.neutral_pose()
     pose[2] = 3.0
@@ -79,8 +79,8 @@ def test_grouped_keywords_refuse_unknown_names_as_python_does():
         (lambda: _core.fit_pose(depth, camera, pose, maks=None), "fit_pose()", "maks"),
         (lambda: _core.foreground_mask(depth, min_dept=0.1), "foreground_mask()", "min_dept"),
         (
-            lambda: _core._TemplateDatabase.from_depths(depth, renderer="ellipsoid"),
-            "_TemplateDatabase.from_depths()",
+            lambda: _core.TemplateDatabase.from_depths(depth, renderer="ellipsoid"),
+            "TemplateDatabase.from_depths()",
             "renderer",
         ),
     ]

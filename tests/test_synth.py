@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 from depthpose import synth
-from depthpose._core import Camera, InvalidInputError
+from depthpose._core import BodyModel, Camera, InvalidInputError
 
 
 @pytest.mark.parametrize("motion", sorted(synth.MOTIONS))
@@ -67,6 +67,21 @@ def test_noise_statistics_follow_the_sensor_model():
     assert 0.003 < lost < 0.1
 
 
+def test_the_clean_person_is_the_render_of_its_pose():
+    seq = synth.make_sequence("walk", frames=2, noise=0.0, view_deg=20, seed=0)
+    fx, fy, cx, cy = seq["intrinsics"]
+    cam = Camera(fx, fy, cx, cy, 320, 240)
+    model = BodyModel(1.75)
+    for f in range(2):
+        depth, labels = model.render_depth(seq["poses"][f], cam)
+        m = seq["mask"][f]
+        np.testing.assert_array_equal(seq["labels"][f][m], labels[m])
+        assert np.abs(seq["depth"][f][m] / 1000 - depth[m]).max() < 0.0006
+        np.testing.assert_allclose(seq["joints"][f], model.joints(seq["poses"][f]), atol=1e-6)
+    # Motions are periodic in their phase.
+    np.testing.assert_array_equal(synth.motion_pose("wave", 1.25), synth.motion_pose("wave", 0.25))
+
+
 def test_turn_and_view_rotate_the_body():
     side = synth.make_sequence("wave", frames=1, view_deg=90, noise=0)
     j = side["joints"][0]
@@ -91,3 +106,7 @@ def test_bad_arguments():
         synth.make_sequence(distance=-1.0)
     with pytest.raises(InvalidInputError, match="frames"):
         synth.make_sequence(frames=0)
+    with pytest.raises(InvalidInputError, match="wall_distance"):
+        synth.make_sequence(distance=3.0, wall_distance=3.2)
+    with pytest.raises(InvalidInputError, match="motion"):
+        synth.motion_pose("moonwalk", 0.0)

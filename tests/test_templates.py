@@ -7,7 +7,6 @@ from pathlib import Path
 import numpy as np
 import pytest
 from depthpose import _core
-from depthpose import templates as templates_module
 from depthpose._core import Camera, FileFormatError, InvalidInputError, NoBodyError
 from depthpose.templates import TemplateDatabase, surface_context
 
@@ -24,7 +23,7 @@ def _raycast(index: int, camera: Camera, shift=(0.0, 0.0, 0.0), yaw: float = 0.0
     by ``yaw`` about its hip, ray cast with trimesh."""
     import trimesh
 
-    verts, faces = _core._TemplateDatabase.template_mesh(index, None, distance=3.0)
+    verts, faces = TemplateDatabase.template_mesh(index, None, distance=3.0)
     hip = np.array([0.0, 0.0, 3.0])
     c, s = np.cos(yaw), np.sin(yaw)
     rot = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
@@ -83,14 +82,14 @@ def test_trimesh_raycast_matches_rust_rasteriser(db):
     cam = db.camera
     for index in (5, 300, 700):
         ref = _raycast(index, cam)
-        ours = _core._TemplateDatabase.render_template(index)
+        ours = TemplateDatabase.render_template(index)
         a, b = ref > 0, ours > 0
         assert a.sum() > 500
         assert (a != b).sum() <= 0.02 * a.sum()
         both = a & b
         assert np.abs(ref[both] - ours[both]).max() < 1e-3
     with pytest.raises(InvalidInputError):
-        _core._TemplateDatabase.render_template(768)
+        TemplateDatabase.render_template(768)
 
 
 def test_match_retrieves_raycast_templates(db):
@@ -177,12 +176,26 @@ def test_default_is_cached(tmp_path, monkeypatch):
     assert len(files) == 1
     b = TemplateDatabase.default(progress=False)
     assert b is a  # loaded once per process
-    # A new process (simulated: the in-process cache cleared) loads the file, no rebuild.
-    mtime = files[0].stat().st_mtime_ns
-    monkeypatch.setattr(templates_module, "_DEFAULT_LOADED", {})
+    # Another cache path holding the same file (as a new process finds it): loaded, not
+    # rebuilt, and a database of its own.
+    other = tmp_path / "other"
+    other.mkdir()
+    copy = other / files[0].name
+    copy.write_bytes(files[0].read_bytes())
+    mtime = copy.stat().st_mtime_ns
+    monkeypatch.setenv("DEPTHPOSE_CACHE", str(other))
+    assert TemplateDatabase.default_path() == copy
     c = TemplateDatabase.default(progress=False)
     assert c is not a and c.hash == a.hash
-    assert files[0].stat().st_mtime_ns == mtime
+    assert copy.stat().st_mtime_ns == mtime
+    assert TemplateDatabase.default(progress=False) is c
+    # A corrupt cache file is rebuilt.
+    corrupt = tmp_path / "corrupt"
+    corrupt.mkdir()
+    (corrupt / files[0].name).write_bytes(b"not a zip")
+    monkeypatch.setenv("DEPTHPOSE_CACHE", str(corrupt))
+    assert TemplateDatabase.default(progress=False).hash == a.hash
+    assert TemplateDatabase.load(corrupt / files[0].name).hash == a.hash
 
 
 def test_progress_bar(capsys, monkeypatch):

@@ -29,6 +29,7 @@ from ._core import (
     MAX_IMAGE_PIXELS,
     MAX_RESULT_BYTES,
     Camera,
+    Candidate,
     DepthPoseError,
     FileFormatError,
     InvalidInputError,
@@ -36,9 +37,11 @@ from ._core import (
     MissingFileError,
     NoBodyError,
     ResourceLimitError,
+    TemplateDatabase,
     __version__,
     depth_to_points,
     pixel_graph,
+    surface_context,
     surface_normals,
 )
 from .body import BodyModel
@@ -63,7 +66,6 @@ from .fit import (
 from .io import read_depth, read_image, write_depth
 from .pipeline import PipelineConfig, PoseEstimator, PoseResult, PoseTracker
 from .stereo_pose import StereoPoseEstimator, StereoPoseTracker, estimate_stereo
-from .templates import Candidate, TemplateDatabase, surface_context
 
 __all__ = [
     "BodyModel",

@@ -2,19 +2,19 @@
 # by mypy.stubtest (.ci/run, with .ci/stubtest_allowlist.txt) and tests/test_stub.py. The
 # native classes cannot be subclassed (@final); their constructors are __new__, as the
 # native types define them.
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from os import PathLike
+from pathlib import Path
 from typing import Any, final
 
 import numpy as np
 import numpy.typing as npt
 from typing_extensions import Self, disjoint_base
 
-from depthpose.templates import TemplateDatabase
-
 __all__ = [
     "BodyModel",
     "Camera",
+    "Candidate",
     "Cluster",
     "DepthPoseError",
     "FileFormatError",
@@ -30,6 +30,7 @@ __all__ = [
     "MAX_LABELS",
     "MAX_RESULT_BYTES",
     "MIN_DEPTH_SCALE",
+    "MOTIONS",
     "MaxflowGraph",
     "MissingFileError",
     "NoBodyError",
@@ -43,12 +44,9 @@ __all__ = [
     "ShapeFitResult",
     "StereoPoseEstimator",
     "StereoPoseTracker",
-    "_TemplateDatabase",
+    "TemplateDatabase",
     "__version__",
-    "_default_model_shape",
     "_euler_zxy",
-    "_rotation_matrix",
-    "_rotation_vector",
     "alpha_beta_swap",
     "alpha_expansion",
     "crf_energy",
@@ -60,7 +58,9 @@ __all__ = [
     "foreground_mask",
     "grid_edges",
     "label_all_pixels",
+    "make_sequence",
     "mirror_view",
+    "motion_pose",
     "pixel_graph",
     "pose_from_joints",
     "read_depth_image",
@@ -345,16 +345,58 @@ def surface_context(
         (N, 2) float32 sample positions normalised to the body's extent.
     """
 
-def _default_model_shape() -> npt.NDArray[np.float64]: ...
-def _rotation_matrix(vector: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
-def _rotation_vector(matrix: npt.ArrayLike) -> npt.NDArray[np.float64]: ...
 def _euler_zxy(matrix: npt.ArrayLike) -> tuple[float, float, float]: ...
 
 @final
-class _TemplateDatabase:
+class Candidate:
+    """A template matched to a depth image, placed at the observed body."""
+
+    @property
+    def index(self) -> int:
+        """The template's index (0..768): ``view·256 + right arm·64 + left arm·16 +
+        right leg·4 + left leg``."""
+    @property
+    def view(self) -> int:
+        """The template's view: 0 front, 1 left side, 2 right side."""
+    @property
+    def pose(self) -> npt.NDArray[np.float64]:
+        """(22,) the template's pose placed at the observed body (camera frame)."""
+    @property
+    def joints(self) -> npt.NDArray[np.float64]:
+        """(15, 3) the joints of :attr:`pose`, camera frame."""
+    @property
+    def cost(self) -> float:
+        """Mean assignment cost per descriptor sample (lower is better)."""
+    @property
+    def prune_cost(self) -> float:
+        """The pruning stage's score."""
+    @property
+    def scale(self) -> float:
+        """Observed body size over the template body's size."""
+    @property
+    def code(self) -> tuple[str, str, str, str, str]:
+        """(right arm, left arm, right leg, left leg, view) names of the template."""
+
+@final
+class TemplateDatabase:
+    """768 rendered template poses (4 poses per arm and per leg, 3 views) with their
+    surface-context descriptors; :meth:`match` finds the templates that look like the
+    body in a depth image, placed at it.
+
+    Make one with :meth:`build`, :meth:`load` or :meth:`default` (the cached database
+    every estimator uses unless given another).
+    """
+
+    ARM_POSES: tuple[str, ...]
+    """Names of the arm poses, in code order."""
+    LEG_POSES: tuple[str, ...]
+    """Names of the leg poses, in code order."""
+    VIEWS: tuple[str, ...]
+    """Names of the views, in code order."""
     @staticmethod
     def build(
-        model_shape: npt.NDArray[np.float64] | None = None,
+        model: BodyModel | npt.NDArray[np.generic] | None = None,
+        camera: Camera | None = None,
         *,
         width: int = 96,
         height: int = 96,
@@ -366,12 +408,54 @@ class _TemplateDatabase:
         angular_bins: int = 12,
         seed: int = 0,
         depth_weight: float = 0.0,
-        progress: Callable[[int, int], object] | None = None,
-    ) -> _TemplateDatabase: ...
+        progress: bool = True,
+    ) -> TemplateDatabase:
+        """Renders and describes the 768 templates.
+
+        Parameters
+        ----------
+        model
+            The body rendered: a :class:`BodyModel`, its 27 shape values, or None (the
+            default model).
+        camera
+            If given, sets the template image size (``width`` and ``height``); the
+            templates are always rendered with the body centred, and the descriptors
+            are scale-invariant.
+        width, height
+            Template image size in pixels.
+        distance
+            Distance of the body from the template camera (metres).
+        field_height
+            Height of the scene the template image spans at ``distance`` (metres).
+        renderer
+            "superquadric" (the native rasteriser of the super-quadric meshes),
+            "ellipsoid" (native ray casting of the fitting ellipsoids) or "trimesh"
+            (trimesh ray casting of the super-quadric meshes; slow without embree).
+        samples, radial_bins, angular_bins, seed
+            The descriptor: ``samples`` pixels drawn with ``seed``, histograms over
+            ``radial_bins`` × ``angular_bins`` log-polar bins.
+        depth_weight
+            > 0 adds the body's relief (depth relative to its centre) as a fourth value
+            per bin, a depthpose extension of the paper's normals-only descriptor (off
+            by default; docs/design.md has its effect).
+        progress
+            Shows a progress bar on stderr when stderr is a terminal.
+
+        Returns
+        -------
+        TemplateDatabase
+
+        Raises
+        ------
+        InvalidInputError
+            A setting out of range (the message names it).
+        ResourceLimitError
+            Descriptors beyond ``MAX_RESULT_BYTES``.
+        """
     @staticmethod
     def from_depths(
         depths: npt.NDArray[np.generic],
-        model_shape: npt.NDArray[np.float64] | None = None,
+        model: BodyModel | npt.NDArray[np.generic] | None = None,
         *,
         width: int = 96,
         height: int = 96,
@@ -382,61 +466,132 @@ class _TemplateDatabase:
         angular_bins: int = 12,
         seed: int = 0,
         depth_weight: float = 0.0,
-    ) -> _TemplateDatabase: ...
+    ) -> TemplateDatabase:
+        """The database of template depth images rendered elsewhere; the model and
+        the settings are those of :meth:`build`.
+
+        Parameters
+        ----------
+        depths
+            (768, height, width) float metres in template order, rendered for the
+            template camera of the settings (:attr:`camera`).
+        """
     @staticmethod
     def render_template(
         index: int,
-        model_shape: npt.NDArray[np.float64] | None = None,
+        model: BodyModel | npt.NDArray[np.generic] | None = None,
         *,
         width: int = 96,
         height: int = 96,
         distance: float = 3.0,
         field_height: float = 2.4,
         renderer: str = "superquadric",
-    ) -> npt.NDArray[np.float32]: ...
+    ) -> npt.NDArray[np.float32]:
+        """The depth image (height, width) float32 metres of template ``index`` as
+        :meth:`build` renders it ("superquadric" or "ellipsoid")."""
     @staticmethod
     def template_mesh(
         index: int,
-        model_shape: npt.NDArray[np.float64] | None = None,
+        model: BodyModel | npt.NDArray[np.generic] | None = None,
         *,
         distance: float = 3.0,
         rings: int = 16,
         sectors: int = 20,
-    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]: ...
-    def match_depth(
+    ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.int64]]:
+        """The super-quadric meshes of template ``index`` (every segment in one mesh,
+        template camera frame, the body ``distance`` m ahead).
+
+        Returns
+        -------
+        vertices : ndarray
+            (V, 3) float64.
+        faces : ndarray
+            (F, 3) int64 vertex indices.
+        """
+    def match(
         self,
         depth: npt.NDArray[np.generic],
         camera: Camera,
-        mask: npt.NDArray[np.bool_] | None = None,
-        *,
+        mask: npt.NDArray[np.generic] | None = None,
         top_k: int = 5,
+        *,
         shortlist: int = 16,
         representatives: int = 8,
         location_weight: float = 0.1,
         dummy_cost: float = 0.15,
         rerank: int = 0,
-    ) -> tuple[list[dict[str, Any]], list[int]]: ...
+    ) -> list[Candidate]:
+        """The best ``top_k`` templates for the body in ``depth``, each placed at the
+        observed body, best first.
+
+        Parameters
+        ----------
+        depth
+            (H, W) float metres or uint16 millimetres, the camera's size.
+        camera
+            The depth camera.
+        mask
+            (H, W) bool: the person's pixels (default: every valid reading).
+        top_k
+            How many candidates.
+        shortlist
+            Templates the pruning stage keeps for the exact assignment (grows to
+            ``max(shortlist, top_k, rerank)``).
+        representatives
+            Representative descriptors per template in the pruning stage.
+        location_weight, dummy_cost
+            The assignment cost's weight of the samples' positions, and the cost of
+            leaving a sample unmatched.
+        rerank
+            > 0 re-orders the exact stage's best ``rerank`` candidates by how well each
+            placed pose explains the depth in 3-D (the fit's data and free-space terms):
+            a better first candidate for about 0.22 ms per candidate (docs/design.md).
+
+        Returns
+        -------
+        list of Candidate
+
+        Raises
+        ------
+        NoBodyError
+            No body in the depth (or the mask).
+        InvalidInputError
+            A bad argument.
+        """
+    def match_with_shortlist(
+        self,
+        depth: npt.NDArray[np.generic],
+        camera: Camera,
+        mask: npt.NDArray[np.generic] | None = None,
+        top_k: int = 5,
+        *,
+        shortlist: int = 16,
+        representatives: int = 8,
+        location_weight: float = 0.1,
+        dummy_cost: float = 0.15,
+        rerank: int = 0,
+    ) -> tuple[list[Candidate], list[int]]:
+        """:meth:`match`, and the pruning stage's short list (template indices, best
+        first)."""
     def exact_costs(
         self,
         depth: npt.NDArray[np.generic],
         camera: Camera,
-        indices: list[int],
-        mask: npt.NDArray[np.bool_] | None = None,
+        indices: Sequence[int] | npt.NDArray[np.integer],
+        mask: npt.NDArray[np.generic] | None = None,
         *,
         location_weight: float = 0.1,
         dummy_cost: float = 0.15,
-    ) -> list[float]: ...
-    def to_arrays(self) -> dict[str, Any]: ...
+    ) -> npt.NDArray[np.float64]:
+        """The exact assignment costs of the body in ``depth`` against the templates
+        ``indices``, without pruning: (len(indices),) float64."""
+    def save(self, path: str | PathLike[str]) -> None:
+        """Writes the database to an ``.npz`` file (with its format version and the
+        hash of its model and settings), replacing ``path`` at once when complete."""
     @staticmethod
-    def from_arrays(
-        arrays: dict[str, Any],
-        source: str,
-        model_shape: npt.NDArray[np.float64] | None = None,
-        config: npt.NDArray[np.float64] | None = None,
-    ) -> _TemplateDatabase: ...
-    @staticmethod
-    def settings(
-        model_shape: npt.NDArray[np.float64] | None = None,
+    def load(
+        path: str | PathLike[str],
+        model: BodyModel | npt.NDArray[np.generic] | None = None,
         *,
         width: int = 96,
         height: int = 96,
@@ -448,20 +603,76 @@ class _TemplateDatabase:
         angular_bins: int = 12,
         seed: int = 0,
         depth_weight: float = 0.0,
-    ) -> tuple[str, npt.NDArray[np.float64]]: ...
-    @property
-    def hash(self) -> str: ...
-    @property
-    def model_shape(self) -> npt.NDArray[np.float64]: ...
-    @property
-    def poses(self) -> npt.NDArray[np.float64]: ...
-    @property
-    def joints(self) -> npt.NDArray[np.float64]: ...
-    @property
-    def views(self) -> list[int]: ...
-    @property
-    def camera(self) -> Camera: ...
+    ) -> TemplateDatabase:
+        """Reads a database written by :meth:`save`. When ``model`` or any setting
+        (those of :meth:`build`) is given, the file must be the database of this model
+        (None: the default model) and these settings.
+
+        Parameters
+        ----------
+        path
+            The ``.npz`` file.
+
+        Raises
+        ------
+        MissingFileError
+            No such file.
+        FileFormatError
+            Not a template database, corrupt, of another format version, or (with a
+            model or settings given) built for another model or other settings.
+        """
+    @staticmethod
+    def default_path() -> Path:
+        """Where the default database is cached: ``$DEPTHPOSE_CACHE`` (or
+        ``~/.cache/depthpose``) ``/templates-<hash>.npz``, named by the hash of the
+        default model and settings."""
+    @staticmethod
+    def default(*, progress: bool = True) -> TemplateDatabase:
+        """The database of the default model and settings, cached at
+        :meth:`default_path`: built and saved on first use (a stale or corrupt file is
+        rebuilt), and loaded once per process and cache path, so every estimator made
+        without ``templates=`` shares one read-only database (instead of ~0.35 s and
+        ~60 MB each).
+
+        Parameters
+        ----------
+        progress
+            Shows a progress bar while building, when stderr is a terminal.
+        """
+    @staticmethod
+    def _settings_hash(
+        model: BodyModel | npt.NDArray[np.generic] | None = None,
+        *,
+        width: int = 96,
+        height: int = 96,
+        distance: float = 3.0,
+        field_height: float = 2.4,
+        renderer: str = "superquadric",
+        samples: int = 100,
+        radial_bins: int = 5,
+        angular_bins: int = 12,
+        seed: int = 0,
+        depth_weight: float = 0.0,
+    ) -> str: ...
     def __len__(self) -> int: ...
+    @property
+    def hash(self) -> str:
+        """Hash (hex) of the format version, the model and the settings."""
+    @property
+    def model_shape(self) -> npt.NDArray[np.float64]:
+        """(27,) shape values of the body the templates show."""
+    @property
+    def poses(self) -> npt.NDArray[np.float64]:
+        """(768, 22) template poses as rendered (hip centre straight ahead)."""
+    @property
+    def joints(self) -> npt.NDArray[np.float64]:
+        """(768, 15, 3) template joints, template camera frame."""
+    @property
+    def views(self) -> list[int]:
+        """The view of each template (0 front, 1 left side, 2 right side)."""
+    @property
+    def camera(self) -> Camera:
+        """The camera the templates are rendered with."""
 
 # ---- body ---------------------------------------------------------------------------
 @final
@@ -1175,7 +1386,7 @@ class PoseEstimator:
         ``BodyModel()`` (1.75 m reference proportions) scaled, frame by frame, to the
         size that explains the depth best (``config.size_range``).
     templates
-        A :class:`~depthpose.templates.TemplateDatabase` (default: the cached default
+        A :class:`TemplateDatabase` (default: the cached default
         database, built on first use).
     config
         A :class:`PipelineConfig` (default: ``PipelineConfig()``).
@@ -1552,3 +1763,77 @@ def mirror_view(pose: npt.NDArray[np.generic]) -> npt.NDArray[np.float64]:
 
 def rest_pose_penalty(poses: npt.NDArray[np.generic], weight: float) -> npt.NDArray[np.float64]:
     """``weight`` × Σ θ² over the 14 limb angles of each pose (N, 22) → (N,)."""
+
+# ---- synthetic sequences --------------------------------------------------------------
+MOTIONS: tuple[str, ...]
+"""The motions :func:`make_sequence` renders: "walk", "wave", "squat", "turn",
+"arm_raise"."""
+
+def motion_pose(motion: str, t: float) -> npt.NDArray[np.float64]:
+    """The joint angles (22,) of ``motion`` at phase ``t`` (modulo 1); the root parts
+    are zero."""
+
+def make_sequence(
+    motion: str = "wave",
+    frames: int = 30,
+    camera: Camera | None = None,
+    *,
+    distance: float = 3.0,
+    view_deg: float = 0.0,
+    noise: float = 1.0,
+    seed: int = 0,
+    height: float = 1.75,
+    fps: float = 30.0,
+    cycles: float = 1.0,
+    camera_height: float = 1.2,
+    tilt_deg: float = 5.0,
+    wall_distance: float | None = None,
+) -> dict[str, npt.NDArray[Any]]:
+    """A synthetic depth sequence of the body model in a room, through a Kinect-v1-like
+    sensor. The same seed gives the same sequence.
+
+    Parameters
+    ----------
+    motion
+        One of :data:`MOTIONS`.
+    frames
+        Number of frames, 1..10000.
+    camera
+        The depth camera (default: ``Camera.itop()``, 320×240).
+    distance
+        The hip centre's distance ahead at the start (m), 0.8..8.
+    view_deg
+        The subject's yaw (degrees): 0 faces the camera, +90 turns the left side
+        toward it.
+    noise
+        Sensor noise scale, 0..10 (0: the exact render, millimetre-rounded).
+    seed
+        Seed of the sensor noise.
+    height
+        The subject's height (m).
+    fps
+        Frame rate recorded with the sequence.
+    cycles
+        Motion cycles over the sequence.
+    camera_height
+        The camera's height above the floor (m).
+    tilt_deg
+        The camera's downward pitch (degrees).
+    wall_distance
+        The back wall's distance (m), at least 0.5 m behind the subject (default:
+        1.5 m behind).
+
+    Returns
+    -------
+    dict
+        ``depth`` (T, H, W) uint16 millimetres, ``background`` (H, W) uint16 (the empty
+        room), ``mask`` (T, H, W) bool (the person), ``joints`` (T, 15, 3) float32
+        (camera frame), ``intrinsics`` (4,) [fx, fy, cx, cy], ``joint_names``, ``fps``,
+        ``meta`` (the settings as JSON), ``poses`` (T, 22) and ``labels`` (T, H, W)
+        int16 (the body part of each person pixel, −1 elsewhere).
+
+    Raises
+    ------
+    InvalidInputError
+        A setting out of range (the message names it).
+    """

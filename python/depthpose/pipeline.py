@@ -28,11 +28,11 @@ from ._core import (
     PoseEstimator,
     PoseResult,
     PoseTracker,
+    TemplateDatabase,
     mirror_view,
     rest_pose_penalty,
     swap_limbs,
 )
-from .templates import TemplateDatabase
 
 __all__ = [
     "JOINT_NAMES",

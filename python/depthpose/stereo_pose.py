@@ -22,8 +22,8 @@ from ._core import (
     PoseResult,
     StereoPoseEstimator,
     StereoPoseTracker,
+    TemplateDatabase,
 )
-from .templates import TemplateDatabase
 
 __all__ = ["StereoPoseEstimator", "StereoPoseTracker", "estimate_stereo"]
 

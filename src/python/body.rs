@@ -618,20 +618,6 @@ fn vector_arg(value: &Bound<'_, PyAny>, name: &str) -> PyResult<nalgebra::Vector
     Ok(nalgebra::Vector3::new(a.data[0], a.data[1], a.data[2]))
 }
 
-/// The (3, 3) rotation matrix of a rotation vector (3,).
-#[pyfunction]
-fn _rotation_matrix<'py>(py: Python<'py>, vector: &Bound<'py, PyAny>) -> PyResult<F64Array<'py>> {
-    let m = rotation::matrix_from_rotation_vector(&vector_arg(vector, "vector")?);
-    to_numpy(py, m.transpose().as_slice().to_vec(), &[3, 3])
-}
-
-/// The rotation vector (3,) of a (3, 3) rotation matrix, accurate near a half turn.
-#[pyfunction]
-fn _rotation_vector<'py>(py: Python<'py>, matrix: &Bound<'py, PyAny>) -> PyResult<F64Array<'py>> {
-    let v = rotation::rotation_vector_from_matrix(&matrix_arg(matrix, "matrix")?);
-    to_numpy(py, v.as_slice().to_vec(), &[3])
-}
-
 /// The Euler angles (z, x, y) in degrees of a (3, 3) rotation matrix, R = Rz·Rx·Ry.
 #[pyfunction]
 fn _euler_zxy(matrix: &Bound<'_, PyAny>) -> PyResult<(f64, f64, f64)> {
@@ -641,7 +627,5 @@ fn _euler_zxy(matrix: &Bound<'_, PyAny>) -> PyResult<(f64, f64, f64)> {
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyBodyModel>()?;
-    m.add_function(wrap_pyfunction!(_rotation_matrix, m)?)?;
-    m.add_function(wrap_pyfunction!(_rotation_vector, m)?)?;
     m.add_function(wrap_pyfunction!(_euler_zxy, m)?)
 }

@@ -19,6 +19,7 @@ mod pipeline;
 mod segment;
 mod stereo;
 mod stereo_pose;
+mod synth;
 mod templates;
 
 use crate::error::Error;
@@ -198,6 +199,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     pipeline::register(m)?;
     stereo::register(m)?;
     stereo_pose::register(m)?;
+    synth::register(m)?;
     templates::register(m)?;
     Ok(())
 }

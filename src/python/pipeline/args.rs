@@ -4,8 +4,7 @@
 
 use super::super::body::PyBodyModel;
 use super::super::convert::{
-    array_like, bool_array, camera as camera_arg, depth_array, f64_array, invalid, object,
-    type_name, wrong_type, Flag,
+    array_like, bool_array, camera as camera_arg, depth_array, f64_array, invalid, object, Flag,
 };
 use super::super::templates::PyTemplateDatabase;
 use super::config::PyPipelineConfig;
@@ -73,28 +72,16 @@ impl EstimatorParts {
     }
 }
 
-/// The native database of `templates`, a `depthpose.TemplateDatabase` (None: its
+/// The native database of `templates`, a `depthpose.TemplateDatabase` (None: the
 /// cached default database, `TemplateDatabase.default()`).
 fn templates_arg(
     py: Python<'_>,
     templates: Option<&Bound<'_, PyAny>>,
 ) -> PyResult<Arc<TemplateDatabase>> {
-    let class = py
-        .import("depthpose.templates")?
-        .getattr("TemplateDatabase")?;
-    let db = match templates {
-        None => class.call_method0("default")?,
-        Some(t) => t.clone(),
-    };
-    if !db.is_instance(&class)? {
-        return Err(wrong_type(
-            "templates",
-            "a TemplateDatabase",
-            &type_name(&db),
-        ));
+    match templates {
+        None => PyTemplateDatabase::default_shared(py),
+        Some(t) => Ok(object::<PyTemplateDatabase>(t, "templates", "a TemplateDatabase")?.shared()),
     }
-    let native = db.getattr("_db")?;
-    Ok(object::<PyTemplateDatabase>(&native, "templates", "a native template database")?.shared())
 }
 
 /// Whether a tracker calibrates the body's shape: `calibrate`, else (None) when no
