@@ -410,6 +410,8 @@ def test_bad_input_names_the_argument():
         dp.fit_pose(depth[:, :100], CAM, truth)
     with pytest.raises(dp.NoBodyError):
         dp.fit_pose(np.zeros_like(depth), CAM, truth)
+    with pytest.raises(dp.InvalidInputError, match="depth: a foreground reading of 1e"):
+        dp.fit_poses(np.full_like(depth, 1e30), CAM, truth[None])
     with pytest.raises(dp.InvalidInputError, match="mask"):
         dp.fit_pose(depth, CAM, truth, mask=np.ones((3, 3), bool))
     with pytest.raises(dp.InvalidInputError, match="sigma"):

@@ -254,6 +254,10 @@ impl PointWeights {
     }
 }
 
+/// The farthest depth reading a fit takes (metres): far beyond any sensor, and near
+/// enough that squared distances between its points stay finite in `f32`.
+pub const MAX_FIT_DEPTH: f32 = 1.0e6;
+
 /// `weights` as a fit takes them (None when empty).
 fn weights_of(weights: &[f32]) -> Option<&[f32]> {
     (!weights.is_empty()).then_some(weights)
@@ -271,6 +275,21 @@ impl FitProblem {
         config.validate()?;
         let view = DepthView::new(depth, camera.height, camera.width, "depth")?;
         let cloud = Cloud::from_depth(&view, camera, mask)?;
+        if let Some(z) = cloud
+            .points
+            .iter()
+            .map(|p| p[2])
+            .find(|z| *z > MAX_FIT_DEPTH)
+        {
+            return Err(Error::invalid(
+                "depth",
+                format!(
+                    "a foreground reading of {} m; a fit takes readings up to {} m",
+                    crate::error::brief(z as f64),
+                    crate::error::brief(MAX_FIT_DEPTH as f64)
+                ),
+            ));
+        }
         if cloud.len() < MIN_POINTS {
             return Err(Error::NoBody(format!(
                 "the foreground has {} points, at least {MIN_POINTS} are needed",

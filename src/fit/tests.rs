@@ -531,3 +531,22 @@ fn swapped_limb_starts_never_end_higher() {
         assert_eq!(r, again);
     }
 }
+
+/// A depth image of absurd readings is refused naming `depth`, not failing later on
+/// the CRF weights its point distances would overflow.
+#[test]
+fn a_fit_refuses_readings_beyond_its_farthest_depth() {
+    let camera = Camera::itop();
+    let n = camera.width * camera.height;
+    for z in [1.0e30f32, 2.0 * MAX_FIT_DEPTH] {
+        let depth = vec![z; n];
+        let err = FitProblem::new(&depth, &camera, None, &FitConfig::default());
+        assert!(
+            matches!(err, Err(Error::InvalidArgument { ref name, .. }) if name == "depth"),
+            "{z}: {:?}",
+            err.err()
+        );
+    }
+    let near = vec![MAX_FIT_DEPTH; n];
+    assert!(FitProblem::new(&near, &camera, None, &FitConfig::default()).is_ok());
+}
