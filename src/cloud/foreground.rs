@@ -29,9 +29,8 @@ pub struct ForegroundConfig {
     /// A component is "large" if it has at least this share of the largest's pixels; the
     /// nearest large component is the body.
     pub large_share: f32,
-    /// Other pieces of at least `min_component` pixels are kept when their median depth
-    /// is within this of where most of the body lies (its 10th to 90th depth
-    /// percentile) and their bounding box touches the body's (grown by 10%).
+    /// Other large pieces are kept when their median depth is within this of the body's
+    /// and their bounding box touches the body's (grown by 10%).
     pub attach_depth: f32,
 }
 
@@ -212,8 +211,6 @@ pub(crate) fn union_box(a: [usize; 4], b: [usize; 4]) -> [usize; 4] {
 pub(crate) struct ComponentStats {
     pub size: usize,
     pub median_depth: f32,
-    /// The 10th and 90th percentiles of the depth: where most of the component lies.
-    pub depth_span: [f32; 2],
     pub bbox: [usize; 4], // row0, col0, row1, col1 (inclusive)
 }
 
@@ -293,7 +290,6 @@ impl Components {
                 stats.push(ComponentStats {
                     size: 0,
                     median_depth: f32::NAN,
-                    depth_span: [f32::NAN; 2],
                     bbox: [usize::MAX, usize::MAX, 0, 0],
                 });
             }
@@ -321,10 +317,8 @@ impl Components {
             for (k, s) in stats.iter_mut().enumerate() {
                 if slot[k] != usize::MAX {
                     let d = &mut depths[slot[k]];
-                    let n = d.len();
-                    let mut at = |q: usize| *d.select_nth_unstable_by(q, f32::total_cmp).1;
-                    s.median_depth = at(n / 2);
-                    s.depth_span = [at(n / 10), at(n - 1 - n / 10)];
+                    let mid = d.len() / 2;
+                    s.median_depth = *d.select_nth_unstable_by(mid, |a, b| a.total_cmp(b)).1;
                 }
             }
         }
@@ -368,11 +362,7 @@ impl Components {
                 && s.bbox[2] >= outer[0]
                 && s.bbox[1] <= outer[3]
                 && s.bbox[3] >= outer[1];
-            // Within `attach_depth` of where most of the body lies: a limb held behind
-            // the body or reaching in front of it is as far from the body's median as
-            // the body's own depth extent allows.
-            let gap = (b.depth_span[0] - s.median_depth).max(s.median_depth - b.depth_span[1]);
-            if overlaps && gap <= config.attach_depth {
+            if overlaps && (s.median_depth - b.median_depth).abs() <= config.attach_depth {
                 keep.push(k);
             }
         }
@@ -430,10 +420,6 @@ mod tests {
             stats.push(ComponentStats {
                 size: depths.len(),
                 median_depth: depths[depths.len() / 2],
-                depth_span: [
-                    depths[depths.len() / 10],
-                    depths[depths.len() - 1 - depths.len() / 10],
-                ],
                 bbox,
             });
         }
@@ -474,7 +460,6 @@ mod tests {
                 prop_assert_eq!(g.bbox, e.bbox);
                 if g.size >= min_size {
                     prop_assert_eq!(g.median_depth, e.median_depth);
-                    prop_assert_eq!(g.depth_span, e.depth_span);
                 } else {
                     prop_assert!(g.median_depth.is_nan());
                 }
@@ -537,33 +522,6 @@ mod tests {
         assert!(m[30 * w + 40], "dropout filled");
         assert!(!m[21 * w + 36], "hole kept");
         assert!(!m[2 * w + 2], "speckle dropped");
-    }
-
-    #[test]
-    fn a_limb_behind_the_body_is_kept_and_a_farther_piece_is_not() {
-        // A body whose depth runs from 2.8 m (top) to 3.4 m (bottom), median 3.1 m; below
-        // its right edge a leg held behind it at 3.7 m, a depth step away from it (its
-        // own component) and more than `attach_depth` behind the body's median, but
-        // within it of the body's far part; beside it a piece at 4.0 m.
-        let (h, w) = (80, 80);
-        let bg = img(h, w, |_, _| 5.0);
-        let depth = img(h, w, |r, c| {
-            if (10..60).contains(&r) && (30..50).contains(&c) {
-                2.8 + 0.6 * (r - 10) as f32 / 49.0
-            } else if (60..70).contains(&r) && (45..55).contains(&c) {
-                3.7
-            } else if (60..70).contains(&r) && (20..28).contains(&c) {
-                4.0
-            } else {
-                5.0
-            }
-        });
-        let d = DepthView::new(&depth, h, w, "depth").unwrap();
-        let b = DepthView::new(&bg, h, w, "background").unwrap();
-        let m = foreground_mask(&d, Some(&b), &ForegroundConfig::default()).unwrap();
-        assert!(m[30 * w + 40], "the body");
-        assert!(m[65 * w + 50], "the leg behind it");
-        assert!(!m[65 * w + 24], "the piece farther back");
     }
 
     #[test]
