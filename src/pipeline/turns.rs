@@ -97,33 +97,45 @@ mod tests {
         }
     }
 
-    #[test]
-    fn a_fit_turned_the_wrong_way_is_turned_back() {
-        // A walker seen obliquely, and a fit of it that faces five eighths of a turn
-        // away with its limbs exchanged: the short EM alone does not turn it back; the turns do.
+    /// A walker seen obliquely by [`Camera::itop`], its mask, and the short fit from
+    /// `start` on that frame: (pose, fit, its discrepancy, estimator, frame) to `check`.
+    fn short_fit_of_an_oblique_walker(
+        start: impl Fn(&Pose) -> Pose + Sync,
+        check: impl FnOnce(&Pose, FitResult, f64, &Estimator, &mut Frame) + Send,
+    ) {
         let model = BodyModel::default();
         let camera = Camera::itop();
         let pose = turned(&walking(&model, 0.9), 0.8);
         let (depth, labels) = model.render_depth(&pose, &camera);
         let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
         let est = estimator(&camera, PipelineConfig::default());
-        let error = |p: &Pose| {
-            let (a, b) = (model.joints(p), model.joints(&pose));
-            a.iter().zip(&b).map(|(x, y)| (x - y).norm()).sum::<f64>() / a.len() as f64
-        };
         crate::pool::on_worker(|| {
             let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
             let config = est.config().short_refit();
-            let wrong = swap_limbs(&turned(&pose, 5.0 * FRAC_PI_4));
             let fit = est
-                .fits(&mut frame, &config, &[wrong], None, None)
+                .fits(&mut frame, &config, &[start(&pose)], None, None)
                 .unwrap()
                 .pop()
                 .unwrap();
             let (score, _) = est.discrepancy(&frame, &fit.pose);
-            assert!(est.explains_badly(&frame, score), "discrepancy {score}");
+            check(&pose, fit, score, &est, &mut frame);
+        });
+    }
+
+    #[test]
+    fn a_fit_turned_the_wrong_way_is_turned_back() {
+        // A fit facing five eighths of a turn away with its limbs exchanged: the short
+        // EM alone does not turn it back; the turns do.
+        let wrong = |p: &Pose| swap_limbs(&turned(p, 5.0 * FRAC_PI_4));
+        short_fit_of_an_oblique_walker(wrong, |pose, fit, score, est, frame| {
+            let model = est.model();
+            let error = |p: &Pose| {
+                let (a, b) = (model.joints(p), model.joints(pose));
+                a.iter().zip(&b).map(|(x, y)| (x - y).norm()).sum::<f64>() / a.len() as f64
+            };
+            assert!(est.explains_badly(frame, score), "discrepancy {score}");
             assert!(error(&fit.pose) > 0.1, "error {}", error(&fit.pose));
-            let (turned_fit, turned_score) = est.try_turns(&mut frame, fit, score).unwrap();
+            let (turned_fit, turned_score) = est.try_turns(frame, fit, score).unwrap();
             assert!(turned_score < score, "{turned_score} against {score}");
             let e = error(&turned_fit.pose);
             assert!(e < 0.04, "mean joint error {e}");
@@ -132,25 +144,14 @@ mod tests {
 
     #[test]
     fn a_fit_that_explains_the_depth_well_is_kept_as_it_is() {
-        let model = BodyModel::default();
-        let camera = Camera::itop();
-        let pose = turned(&walking(&model, 0.9), 0.8);
-        let (depth, labels) = model.render_depth(&pose, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
-        let est = estimator(&camera, PipelineConfig::default());
-        crate::pool::on_worker(|| {
-            let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
-            let config = est.config().short_refit();
-            let fit = est
-                .fits(&mut frame, &config, &[pose], None, None)
-                .unwrap()
-                .pop()
-                .unwrap();
-            let (score, _) = est.discrepancy(&frame, &fit.pose);
-            let kept = fit.pose;
-            let (out, out_score) = est.try_turns(&mut frame, fit, score).unwrap();
-            assert_eq!(out.pose, kept);
-            assert_eq!(out_score, score);
-        });
+        short_fit_of_an_oblique_walker(
+            |p| *p,
+            |_, fit, score, est, frame| {
+                let kept = fit.pose;
+                let (out, out_score) = est.try_turns(frame, fit, score).unwrap();
+                assert_eq!(out.pose, kept);
+                assert_eq!(out_score, score);
+            },
+        );
     }
 }

@@ -3,7 +3,8 @@
 use super::body::{pose_arg, poses_arg, PyBodyModel};
 use super::convert::{
     array_like, body_model, bool_array, camera as camera_arg, check_fit_points, depth_array,
-    f64_array, fit_config, invalid, object, to_numpy, wrong_type, Flag, Int, Real, Text,
+    f64_array, fit_config, invalid, joints_to_numpy, object, to_numpy, wrong_type, Flag, Int, Real,
+    Text,
 };
 use super::keywords::keywords;
 use super::native;
@@ -405,13 +406,7 @@ impl PyFitResult {
     /// The 15 joints (15, 3), camera frame, ITOP order.
     #[getter]
     fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
-        let v = self
-            .result
-            .joints
-            .iter()
-            .flat_map(|j| [j.x, j.y, j.z])
-            .collect();
-        to_numpy(py, v, &[NUM_JOINTS, 3])
+        joints_to_numpy(py, &self.result.joints, &[NUM_JOINTS, 3])
     }
     /// Part labels (H, W) int16: segment 0..15, −1 = background or outlier.
     #[getter]
@@ -516,14 +511,7 @@ impl PyShapeFitResult {
     #[getter]
     fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
         let n = self.result.joints.len();
-        let v = self
-            .result
-            .joints
-            .iter()
-            .flatten()
-            .flat_map(|j| [j.x, j.y, j.z])
-            .collect();
-        to_numpy(py, v, &[n, NUM_JOINTS, 3])
+        joints_to_numpy(py, self.result.joints.iter().flatten(), &[n, NUM_JOINTS, 3])
     }
     /// Part labels of every frame (F, H, W) int16: segment 0..15, −1 = background or
     /// outlier.

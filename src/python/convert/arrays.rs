@@ -467,3 +467,14 @@ pub fn to_numpy<'py, T: Element>(
             ))
         })
 }
+
+/// Joints (any number of 3-vectors, e.g. the 15 of a pose or those of several frames
+/// one after the other) as a numpy array of `shape`, x, y, z per joint.
+pub fn joints_to_numpy<'a, 'py>(
+    py: Python<'py>,
+    joints: impl IntoIterator<Item = &'a nalgebra::Vector3<f64>>,
+    shape: &[usize],
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    let v = joints.into_iter().flat_map(|j| [j.x, j.y, j.z]).collect();
+    to_numpy(py, v, shape)
+}

@@ -1,7 +1,7 @@
 //! `PoseResult`: the pose of one frame, its joints, labels, mask and timings.
 
 use super::super::body::PyBodyModel;
-use super::super::convert::to_numpy;
+use super::super::convert::{joints_to_numpy, to_numpy};
 use super::super::segment::{PyCluster, PyPlane};
 use super::F64Array;
 use crate::body::{BodyModel, JOINT_NAMES, NUM_JOINTS, NUM_PARAMS};
@@ -27,13 +27,7 @@ impl PyPoseResult {
     /// The 15 joints (15, 3), camera frame, metres.
     #[getter]
     fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
-        let v = self
-            .inner
-            .joints
-            .iter()
-            .flat_map(|j| [j.x, j.y, j.z])
-            .collect();
-        to_numpy(py, v, &[NUM_JOINTS, 3])
+        joints_to_numpy(py, &self.inner.joints, &[NUM_JOINTS, 3])
     }
     #[getter]
     fn joint_names(&self) -> Vec<&'static str> {
