@@ -77,9 +77,10 @@ pub fn ensure_positive(value: f64, name: &str) -> Result<()> {
     })
 }
 
-/// A number as a message prints it: the shortest decimal that reads back to `value`,
-/// in exponent form when that is shorter than plain digits (1e300, not 301 digits).
-pub fn brief(value: f64) -> String {
+/// A number as a message prints it: the shortest decimal that reads back to `value`
+/// (an `f32` as written, not widened), in exponent form when that is shorter than plain
+/// digits (1e300, not 301 digits).
+pub fn brief(value: impl std::fmt::Display + std::fmt::LowerExp) -> String {
     let plain = format!("{value}");
     let exp = format!("{value:e}");
     if plain.len() > exp.len() + 2 {

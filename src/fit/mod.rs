@@ -281,14 +281,12 @@ impl FitProblem {
             .map(|p| p[2])
             .find(|z| *z > MAX_FIT_DEPTH)
         {
-            // The reading as written (the shortest decimal of the f32), not its f64 widening.
-            let z: f64 = z.to_string().parse().unwrap_or(z as f64);
             return Err(Error::invalid(
                 "depth",
                 format!(
                     "a foreground reading of {} m; a fit takes readings up to {} m",
                     crate::error::brief(z),
-                    crate::error::brief(MAX_FIT_DEPTH as f64)
+                    crate::error::brief(MAX_FIT_DEPTH)
                 ),
             ));
         }

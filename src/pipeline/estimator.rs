@@ -463,16 +463,27 @@ impl Estimator {
         let winner_poses: Vec<Pose> = winners.iter().map(|f| f.pose).collect();
         let final_config = cfg.fit_with(cfg.final_iterations, cfg.final_stride, Some(false));
         let finals = self.fits(frame, &final_config, &winner_poses, Some(&winners), None)?;
-        let poses: Vec<Pose> = finals.iter().map(|f| f.pose).collect();
-        let final_scores = self.discrepancies(frame, &poses)?;
-        let final_ranking = self.rankings(&final_scores, &poses);
-        let k = first_min(&final_ranking);
+        let (final_best, final_score, final_rank) = self.best_ranked(frame, finals)?;
         // (A brief candidate's labels cover only its own pixels: a final is kept then.)
-        if brief || final_ranking[k] <= best_rank {
-            best_score = final_scores[k];
-            best = finals.into_iter().nth(k).expect("k indexes the finals");
+        if brief || final_rank <= best_rank {
+            (best, best_score) = (final_best, final_score);
         }
         Ok((best, best_score))
+    }
+
+    /// The first of `fits` (not empty) that ranks best ([`Self::rank`]), with its depth
+    /// discrepancy and its rank.
+    pub(super) fn best_ranked(
+        &self,
+        frame: &Frame,
+        fits: Vec<FitResult>,
+    ) -> Result<(FitResult, f64, f64)> {
+        let poses: Vec<Pose> = fits.iter().map(|f| f.pose).collect();
+        let scores = self.discrepancies(frame, &poses)?;
+        let ranking = self.rankings(&scores, &poses);
+        let k = first_min(&ranking);
+        let best = fits.into_iter().nth(k).expect("k indexes the fits");
+        Ok((best, scores[k], ranking[k]))
     }
 
     /// Each of `starts`, or its copy moved onto the observed body
@@ -587,7 +598,7 @@ pub(crate) fn stable_order(values: &[f64]) -> Vec<usize> {
 }
 
 /// The index of the first smallest value.
-pub(super) fn first_min(values: &[f64]) -> usize {
+fn first_min(values: &[f64]) -> usize {
     let mut k = 0;
     for (i, v) in values.iter().enumerate() {
         if *v < values[k] {

@@ -10,7 +10,7 @@
 //! arms and only its legs exchanged (a raised arm read as the other one); each gets a
 //! short EM, and the refit that ranks best replaces the fit when it ranks better.
 
-use super::estimator::{first_min, Estimator, Frame};
+use super::estimator::{Estimator, Frame};
 use super::hypotheses::{swap_limbs, turned};
 use crate::body::Pose;
 use crate::error::Result;
@@ -51,13 +51,9 @@ impl Estimator {
         let starts = turned_starts(&fit.pose);
         let config = self.config().short_refit();
         let fits = self.fits(frame, &config, &starts, None, None)?;
-        let poses: Vec<Pose> = fits.iter().map(|f| f.pose).collect();
-        let scores = self.discrepancies(frame, &poses)?;
-        let ranks = self.rankings(&scores, &poses);
-        let k = first_min(&ranks);
-        if ranks[k] < self.rank(score, &fit.pose) {
-            let best = fits.into_iter().nth(k).expect("k indexes the fits");
-            Ok((best, scores[k]))
+        let (best, best_score, best_rank) = self.best_ranked(frame, fits)?;
+        if best_rank < self.rank(score, &fit.pose) {
+            Ok((best, best_score))
         } else {
             Ok((fit, score))
         }
