@@ -743,7 +743,7 @@ pub fn root_rotation(pose: &Pose) -> Rotation3<f64> {
 /// rotation vector.
 pub fn pose_with_root_increment(pose: &Pose, omega: &Vector3<f64>) -> Pose {
     let r = root_rotation(pose) * Rotation3::from_scaled_axis(*omega);
-    let v = r.scaled_axis();
+    let v = rotation::rotation_vector(&r);
     let mut p = *pose;
     p[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(v.as_slice());
     p

@@ -12,8 +12,16 @@ pub fn matrix_from_rotation_vector(v: &Vector3<f64>) -> Matrix3<f64> {
 /// its unit quaternion, so that it stays accurate for angles near π (where the skew
 /// part of `m` vanishes). `m` is taken as a rotation (orthonormal, determinant 1).
 pub fn rotation_vector_from_matrix(m: &Matrix3<f64>) -> Vector3<f64> {
-    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(*m));
-    q.scaled_axis()
+    rotation_vector(&Rotation3::from_matrix_unchecked(*m))
+}
+
+/// The rotation vector (axis times angle in [0, π]) of `r`, accurate at every angle.
+/// `Rotation3::scaled_axis` reads the axis from the skew part of the matrix, which
+/// vanishes at a half turn: there it returns zero, the identity, for a rotation such as
+/// a quarter roll of a body turned around. Every pose's root rotation is written with
+/// this instead.
+pub fn rotation_vector(r: &Rotation3<f64>) -> Vector3<f64> {
+    UnitQuaternion::from_rotation_matrix(r).scaled_axis()
 }
 
 /// The Euler angles (z, x, y) in radians with m = Rz(z)·Rx(x)·Ry(y), x in [−π/2, π/2];
@@ -81,6 +89,18 @@ mod tests {
             (back - v).norm() < 1e-6 || (back + v).norm() < 1e-6,
             "{back:?}"
         );
+    }
+
+    #[test]
+    fn a_half_turn_about_any_axis_keeps_its_rotation() {
+        // A quarter roll of a body turned around: a half turn about (1, 1, 0)/√2, whose
+        // skew part is exactly zero.
+        let r = Rotation3::from_matrix_unchecked(
+            rz(std::f64::consts::FRAC_PI_2) * ry(std::f64::consts::PI),
+        );
+        let v = rotation_vector(&r);
+        assert!((v.norm() - std::f64::consts::PI).abs() < 1e-9, "{v:?}");
+        assert!((matrix_from_rotation_vector(&v) - r.matrix()).norm() < 1e-9);
     }
 
     #[test]

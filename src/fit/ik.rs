@@ -11,6 +11,7 @@
 use super::lm::{LevenbergMarquardt, LmConfig};
 use super::system::{PoseObjective, N, NN};
 use crate::body::kinematics::Kinematics;
+use crate::body::rotation::rotation_vector;
 use crate::body::{param, BodyModel, Pose, NUM_JOINTS, NUM_PARAMS};
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Rotation3, Vector3};
@@ -247,7 +248,7 @@ pub fn pose_from_joints_with(
     if init.is_none() {
         if let Some((t, r)) = root_from_torso(joints) {
             base[..3].copy_from_slice(t.as_slice());
-            base[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(r.scaled_axis().as_slice());
+            base[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(rotation_vector(&r).as_slice());
         } else {
             let mean = joints.iter().filter(|j| finite(j)).sum::<Vector3<f64>>() / n_finite as f64;
             base[..3].copy_from_slice(mean.as_slice());

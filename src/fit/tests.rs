@@ -411,7 +411,8 @@ fn a_settled_fit_cuts_its_annealing_and_resumes_after_the_cut() {
         .anneal_cut
         .expect("the fit settles before τ has annealed");
     assert!(k + 1 < anneal, "cut after iteration {k}");
-    assert_eq!(cut.termination, EmTermination::Converged);
+    // Settled (converged, or an iteration that changed nothing), not stopped by the limit.
+    assert_ne!(cut.termination, EmTermination::MaxIterations);
     assert!(cut.iterations < full.iterations);
     assert!(full.iterations >= anneal);
     assert_eq!(full.anneal_cut, None);

@@ -8,6 +8,8 @@
 //! the right and left blocks and negating the lateral neck bend mirrors the body in its
 //! own sagittal plane.
 
+use super::orientation::rotate_about_optical_axis;
+use crate::body::rotation::rotation_vector;
 use crate::body::{root_rotation, BodyModel, Pose, NUM_PARAMS};
 use crate::templates::Candidate;
 use nalgebra::{Rotation3, Vector3};
@@ -27,6 +29,22 @@ const LEG: usize = 3;
 
 /// Two hypotheses whose joints are within this mean distance (m) are one.
 const DUPLICATE_DISTANCE: f64 = 0.03;
+
+/// The neutral body (upright, arms down) facing each quarter turn about its own
+/// vertical axis, rolled about the optical axis by each of `rolls`: starts that reach a
+/// body in any orientation without a template's limb poses (a tucked, split or
+/// cartwheeling body no standing template resembles), for the EM to bend its limbs.
+pub fn rolled_neutral_bodies(rolls: &[f64]) -> Vec<Pose> {
+    let neutral = BodyModel::neutral_pose();
+    rolls
+        .iter()
+        .flat_map(|&roll| {
+            (0..4).map(move |q| {
+                rotate_about_optical_axis(&turned(&neutral, q as f64 * PI / 2.0), roll)
+            })
+        })
+        .collect()
+}
 
 /// The left/right-swapped pose: the body mirrored in its own sagittal plane (right and
 /// left limb angles exchanged, lateral neck bend negated), root unchanged. In a side
@@ -57,7 +75,7 @@ pub fn mirror_view(pose: &Pose) -> Pose {
 pub fn turned(pose: &Pose, angle: f64) -> Pose {
     let r = root_rotation(pose) * Rotation3::from_axis_angle(&Vector3::y_axis(), angle);
     let mut out = *pose;
-    out[3..6].copy_from_slice(r.scaled_axis().as_slice());
+    out[3..6].copy_from_slice(rotation_vector(&r).as_slice());
     out
 }
 

@@ -9,6 +9,7 @@
 //! coordinates in general): a pose found in the rotated view is the original pose
 //! rotated by θ, root translation and root rotation alike.
 
+use crate::body::rotation::rotation_vector;
 use crate::body::{root_rotation, Pose};
 use crate::camera::Camera;
 use crate::error::Result;
@@ -165,7 +166,7 @@ pub fn rotate_about_optical_axis(pose: &Pose, theta: f64) -> Pose {
     let r = rz * root_rotation(pose);
     let mut out = *pose;
     out[0..3].copy_from_slice(t.as_slice());
-    out[3..6].copy_from_slice(r.scaled_axis().as_slice());
+    out[3..6].copy_from_slice(rotation_vector(&r).as_slice());
     out
 }
 

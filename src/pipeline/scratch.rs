@@ -7,8 +7,11 @@
 //! tracker calls lost) may be a body the first views misread: upside down but about
 //! vertical, doubled up, or in a pose no template holds upright but one holds rolled.
 //! The search then also runs on the frame seen at every eighth of a turn, and its fit
-//! replaces the first when it ranks better by `switch_margin`. Frames explained well pay
-//! nothing for it.
+//! replaces the first when it ranks better by `switch_margin`. When the wide search's
+//! fit explains the depth badly too, the body may be one no template resembles
+//! (airborne, tucked, split): the neutral bodies at every orientation
+//! ([`super::neutral`]) are fitted as well and the better-ranked reading competes. Frames
+//! explained well pay nothing for either.
 
 use super::estimator::{Estimator, Frame};
 use super::result::Clock;
@@ -38,7 +41,14 @@ impl Estimator {
             // the image is by far the commonest), so, like a tracker's re-check, it
             // replaces the first result only when it ranks better by `switch_margin`:
             // at the model's own size first, then sized.
-            if let Some((best, score)) = self.search_wide(frame, hypotheses)? {
+            if let Some((mut best, mut score)) = self.search_wide(frame, hypotheses)? {
+                if self.explains_badly(frame, score) {
+                    // Explained badly at every roll too: a body no template resembles.
+                    let (other, other_score) = self.search_neutral(frame)?;
+                    if self.rank(other_score, &other.pose) < self.rank(score, &best.pose) {
+                        (best, score) = (other, other_score);
+                    }
+                }
                 let (best, score) = self.repose_limbs(frame, best, score)?;
                 let keep = 1.0 - self.config().switch_margin;
                 if self.rank(score, &best.pose) < unsized_rank * keep {

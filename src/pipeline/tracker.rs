@@ -26,6 +26,7 @@
 use super::estimator::{Estimator, Fitted, Frame};
 use super::hypotheses::swap_limbs;
 use super::result::{Clock, PoseResult, Source};
+use crate::body::rotation::rotation_vector;
 use crate::body::{param, root_rotation, BodyModel, Pose, NUM_SHAPE_FACTORS};
 use crate::error::{Error, Result};
 use crate::fit::start::limbs_swapped;
@@ -466,9 +467,9 @@ impl Tracker {
 fn extrapolate(before: &Pose, prev: &Pose, damping: f64) -> Pose {
     let mut pred: Pose = std::array::from_fn(|i| prev[i] + damping * (prev[i] - before[i]));
     let r_prev = root_rotation(prev);
-    let step = (r_prev * root_rotation(before).inverse()).scaled_axis() * damping;
+    let step = rotation_vector(&(r_prev * root_rotation(before).inverse())) * damping;
     let r_pred = Rotation3::from_scaled_axis(step) * r_prev;
-    pred[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(r_pred.scaled_axis().as_slice());
+    pred[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(rotation_vector(&r_pred).as_slice());
     BodyModel::clamp_pose(&pred)
 }
 

@@ -10,6 +10,7 @@ use super::prune::prune_sum;
 use super::prune::Representatives;
 use super::template::metric_size;
 use crate::assignment::AssignmentWorkspace;
+use crate::body::rotation::rotation_vector;
 use crate::body::{param, Pose, NUM_JOINTS};
 use crate::camera::Camera;
 use crate::cloud::DepthView;
@@ -327,7 +328,7 @@ impl TemplateDatabase {
         let r = m * crate::body::root_rotation(&tpl.pose);
         let mut pose = tpl.pose;
         pose[param::ROOT_T..param::ROOT_T + 3].copy_from_slice(t.as_slice());
-        pose[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(r.scaled_axis().as_slice());
+        pose[param::ROOT_R..param::ROOT_R + 3].copy_from_slice(rotation_vector(&r).as_slice());
         c.pose = pose;
         c.joints = self.model.joints(&pose).map(|j| [j.x, j.y, j.z]);
         c.scale = scale;

@@ -1,5 +1,6 @@
 //! A soft prior toward a pose.
 
+use crate::body::rotation::rotation_vector;
 use crate::body::{root_rotation, Pose};
 use crate::fit::system::{N, NN};
 use nalgebra::{Rotation3, Vector3};
@@ -29,7 +30,7 @@ impl PosePrior {
             r[i] = pose[i] - self.pose[i];
         }
         let rel: Rotation3<f64> = root_rotation(&self.pose).inverse() * root_rotation(pose);
-        let w: Vector3<f64> = rel.scaled_axis();
+        let w: Vector3<f64> = rotation_vector(&rel);
         r[3..6].copy_from_slice(w.as_slice());
         r
     }
