@@ -21,7 +21,7 @@ use crate::error::Result;
 impl Estimator {
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
     /// labelled at every pixel. Laps `clock` at "templates", "fit" and, when the wide
-    /// search runs, "wide".
+    /// search runs, "wide" (and "neutral" for the neutral bodies' fits).
     pub(crate) fn fit_from_scratch(
         &self,
         frame: &mut Frame,
@@ -44,10 +44,12 @@ impl Estimator {
             if let Some((mut best, mut score)) = self.search_wide(frame, hypotheses)? {
                 if self.explains_badly(frame, score) {
                     // Explained badly at every roll too: a body no template resembles.
+                    clock.lap("wide");
                     let (other, other_score) = self.search_neutral(frame)?;
                     if self.rank(other_score, &other.pose) < self.rank(score, &best.pose) {
                         (best, score) = (other, other_score);
                     }
+                    clock.lap("neutral");
                 }
                 let (best, score) = self.repose_limbs(frame, best, score)?;
                 let keep = 1.0 - self.config().switch_margin;
