@@ -23,6 +23,7 @@ __all__ = [
     "InvalidInputError",
     "InvalidTypeError",
     "JOINT_NAMES",
+    "KINECT_SHAPE",
     "MAX_ARRAY_ELEMENTS",
     "MAX_DEPTH_SCALE",
     "MAX_FIT_POINTS",
@@ -63,16 +64,20 @@ __all__ = [
     "motion_pose",
     "pixel_graph",
     "pose_from_joints",
-    "read_depth_image",
+    "read_depth",
     "read_float_image",
-    "read_gray_image",
+    "read_image",
+    "read_npz",
+    "read_pfm",
     "rest_pose_penalty",
     "segment_person",
     "stereo_match",
     "surface_context",
     "surface_normals",
     "swap_limbs",
+    "write_depth",
     "write_depth_png",
+    "write_pfm",
     "write_rgb_png",
 ]
 
@@ -300,11 +305,153 @@ def foreground_mask(
     """
 
 # ---- io -----------------------------------------------------------------------------
-def read_depth_image(
-    path: str | PathLike[str], scale: float = 0.001
-) -> npt.NDArray[np.float32]: ...
-def read_gray_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]: ...
-def read_float_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]: ...
+KINECT_SHAPE: tuple[int, int]
+"""The (height, width) :func:`read_depth` assumes for a raw ``.u16`` file: (480, 640),
+Kinect v1."""
+
+def read_depth(
+    path: str | PathLike[str], scale: float = 0.001, shape: tuple[int, int] | None = None
+) -> npt.NDArray[np.float32]:
+    """Reads a depth image as float32 metres (0 or NaN = no reading), the format by the
+    file's suffix (see the table of units in :mod:`depthpose.io`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.png``, ``.tif``/``.tiff``, ``.npy``, ``.pfm`` or raw ``.u16``/``.raw``
+        file.
+    scale : float
+        Metres per integer unit of 16-bit PNG/TIFF, uint16 ``.npy`` and ``.u16``
+        files (default millimetres), in [1e-6, 1]; float formats hold metres.
+    shape : (int, int), optional
+        (height, width) of a raw ``.u16`` file, which holds no header; default
+        :data:`KINECT_SHAPE`. Ignored for other formats.
+
+    Returns
+    -------
+    ndarray
+        (H, W) float32 metres.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist (a ``FileNotFoundError``).
+    FileFormatError
+        The file is unreadable, corrupt or truncated, not a depth image (8-bit or
+        colour, an array of another dtype or dimension, Python objects), holds negative
+        or infinite depth, has an unknown suffix, or (``.u16``) its size is not
+        ``shape``.
+    ResourceLimitError
+        The header or ``shape`` says more than :data:`MAX_IMAGE_PIXELS` pixels (checked
+        before the pixels are read).
+    InvalidInputError
+        ``scale`` or ``shape`` is out of range or of the wrong type.
+    """
+
+def write_depth(
+    path: str | PathLike[str], depth: npt.NDArray[np.generic], scale: float = 0.001
+) -> None:
+    """Writes depth as a 16-bit PNG (units of ``scale`` metres), ``.npy`` or ``.pfm``
+    (float32 metres), the format by the suffix.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.png``, ``.npy`` or ``.pfm`` file.
+    depth : ndarray
+        (H, W) float metres or uint16 millimetres, as every depthpose function takes it
+        (so uint16 input is millimetres in every format); any memory layout.
+    scale : float
+        Metres per unit of a PNG, in [1e-6, 1].
+
+    Raises
+    ------
+    InvalidInputError
+        Another suffix; negative or infinite depth; for PNG, depth the file cannot
+        store (beyond 65535 units, or below half a unit, which would read back as no
+        reading). NaN is written as 0 in a PNG and kept in ``.npy`` and ``.pfm``.
+    """
+
+def read_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """Any PNG/TIFF/JPEG as a gray float32 image: integer types scaled to [0, 1] by
+    their type's maximum, float TIFF as stored, colour converted by luminance.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    FileFormatError
+        The file is not a readable image.
+    """
+
+def read_float_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """A float TIFF (its first channel) or any other image as stored, float32."""
+
+def read_pfm(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """A PFM image (``Pf`` gray or ``PF`` colour, its first channel) as float32, top row
+    first; the header is checked before the pixels are read.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    FileFormatError
+        Not a PFM file, a corrupt header, or truncated pixels.
+    ResourceLimitError
+        The header says more than :data:`MAX_IMAGE_PIXELS` pixels.
+    """
+
+def write_pfm(
+    path: str | PathLike[str], image: npt.NDArray[np.generic], *, nan_as_inf: bool = False
+) -> None:
+    """Writes a 2-D image (any real dtype; NaN and inf kept) as little-endian gray PFM.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    image : ndarray
+        (H, W) numbers, any memory layout.
+    nan_as_inf : bool
+        Store NaN as +inf, the Middlebury convention for "unknown".
+
+    Raises
+    ------
+    InvalidInputError
+        Not a non-empty 2-D array of numbers (an object or string array is an
+        :class:`InvalidTypeError`).
+    """
+
+def read_npz(
+    path: str | PathLike[str], what: str = "a .npz archive", keys: list[str] | None = None
+) -> dict[str, npt.NDArray[Any]]:
+    """The arrays of a ``.npz`` file (numpy's zip of ``.npy`` arrays), read without
+    pickles, each of its stored dtype, shape and order.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The archive.
+    what : str
+        What the file should be, for errors ("a depth sequence").
+    keys : list of str, optional
+        Read only these arrays (those the file holds); default all.
+
+    Returns
+    -------
+    dict of str to ndarray
+        The arrays by key, in the archive's order.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    FileFormatError
+        Not a zip archive; an entry with a corrupt header, of Python objects, or
+        truncated or corrupt. Every entry is checked, read or not; the message names
+        the file and says it is not ``what``.
+    """
+
 def write_depth_png(
     path: str | PathLike[str], depth: npt.NDArray[np.generic], scale: float = 0.001
 ) -> None: ...

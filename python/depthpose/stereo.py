@@ -137,13 +137,7 @@ def _array(a: ArrayLike) -> object:
 def write_pfm(path: str | Path, image: NDArray[np.float32]) -> None:
     """Writes a single-channel float image as PFM (little-endian, bottom row first);
     NaN is stored as +inf, the Middlebury convention for "unknown"."""
-    from . import _validate
-    from .io import write_pfm as _write
-
-    img = _validate.array(image, "image", image=1)
-    if img.dtype.kind != "f":
-        img = _validate.numbers_array(img, "image")
-    _write(path, np.where(np.isnan(img), np.inf, img))
+    _core.write_pfm(path, image, nan_as_inf=True)
 
 
 def _write_disparity(path: Path, disparity: NDArray[np.float32], max_disparity: float) -> None:
@@ -184,8 +178,8 @@ def cli_stereo(argv: list[str]) -> int:
     args = p.parse_args(argv)
     if args.depth_out is not None and (args.focal is None or args.baseline is None):
         p.error("--depth-out needs --focal and --baseline")
-    left = _core.read_gray_image(str(args.left))
-    right = _core.read_gray_image(str(args.right))
+    left = _core.read_image(args.left)
+    right = _core.read_image(args.right)
     disparity = match(
         left,
         right,
