@@ -12,6 +12,8 @@ import numpy.typing as npt
 from typing_extensions import Self, disjoint_base
 
 __all__ = [
+    "BVH_NAMES",
+    "BVH_PARENTS",
     "BodyModel",
     "Camera",
     "Candidate",
@@ -75,8 +77,10 @@ __all__ = [
     "surface_context",
     "surface_normals",
     "swap_limbs",
+    "write_bvh",
     "write_depth",
     "write_depth_png",
+    "write_jsonl",
     "write_pfm",
     "write_rgb_png",
 ]
@@ -465,6 +469,76 @@ def depth_metres(
     (H, W) float32/float64 metres or uint16 millimetres, C-contiguous, no negative or
     infinite value (0 and NaN: no reading); returned as float32 metres. Errors name
     ``name`` (default "depth")."""
+
+# ---- exports ------------------------------------------------------------------------
+BVH_PARENTS: dict[str, str | None]
+"""Parent of each body segment (part names of the body model); None for the root."""
+BVH_NAMES: dict[str, str]
+"""The BVH joint name of each body segment: the names animation tools map by default
+(Blender, MotionBuilder, Mixamo-style retargeting); Left and Right are the subject's."""
+
+def write_bvh(
+    path: str | PathLike[str],
+    model: BodyModel,
+    poses: npt.ArrayLike,
+    fps: float = 30.0,
+    *,
+    confidence: npt.ArrayLike | None = None,
+) -> None:
+    """Writes a tracked sequence as BVH, y up (x = the subject's left, z = towards the
+    camera at the rest pose), metres.
+
+    One joint per body segment at its proximal joint, named as animation tools expect
+    (:data:`BVH_NAMES`: Hips, Spine, Neck, Head, LeftArm, LeftForeArm, LeftHand,
+    LeftUpLeg, LeftLeg, LeftFoot, and the Right ones); each chain ends in an End Site
+    at the far end of its segment. The rest pose is all joint angles zero (segments
+    parallel to the body frame). Each frame holds the root's position and every
+    joint's rotation relative to its parent as Z-X-Y Euler angles in degrees.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    model : BodyModel
+        The body model the poses are of.
+    poses : array_like
+        (T, 22) poses. A failed frame (a pose of 22 NaN, as the estimators record it)
+        repeats the previous frame.
+    fps : float
+        Frames per second, in (0, 1e6].
+    confidence : array_like, optional
+        (T, 15), the estimators' per-joint confidence: a leg whose hip, knee and foot
+        all have confidence 0 in a frame (not seen) is written at rest in that frame
+        rather than with invented angles.
+
+    Raises
+    ------
+    InvalidInputError
+        ``poses`` not (T, 22), holding an infinite value, a frame with some NaN
+        parameters but not all, or every frame NaN; ``fps`` out of range;
+        ``confidence`` of another shape or not finite.
+    InvalidTypeError
+        ``model`` is not a :class:`BodyModel`; an object or string array.
+    """
+
+def write_jsonl(path: str | PathLike[str], results: Sequence[Any]) -> None:
+    """Writes one JSON line per frame, ``{"frame": k, ...}`` with the fields of the
+    frame's ``PoseResult.to_dict()``, or ``{"frame": k, "joints": null}`` for a failed
+    frame (None).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    results : sequence
+        A ``PoseResult`` (anything with ``to_dict()``) or None per frame.
+
+    Raises
+    ------
+    InvalidTypeError
+        An item that is neither None nor has ``to_dict()``, or a value JSON cannot
+        hold.
+    """
 
 # ---- templates ----------------------------------------------------------------------
 def surface_context(

@@ -11,6 +11,7 @@ mod body;
 mod camera;
 mod cloud;
 mod convert;
+mod export;
 mod fit;
 mod graphcut;
 mod io;
@@ -192,6 +193,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     camera::register(m)?;
     body::register(m)?;
     cloud::register(m)?;
+    export::register(m)?;
     fit::register(m)?;
     graphcut::register(m)?;
     io::register(m)?;
