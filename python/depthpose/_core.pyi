@@ -5,7 +5,7 @@
 from collections.abc import Mapping, Sequence
 from os import PathLike
 from pathlib import Path
-from typing import Any, final
+from typing import Any, Literal, final, overload
 
 import numpy as np
 import numpy.typing as npt
@@ -62,6 +62,7 @@ __all__ = [
     "grid_edges",
     "label_all_pixels",
     "make_sequence",
+    "match",
     "mirror_view",
     "motion_pose",
     "pixel_graph",
@@ -73,12 +74,11 @@ __all__ = [
     "read_pfm",
     "rest_pose_penalty",
     "segment_person",
-    "stereo_match",
     "surface_context",
     "surface_normals",
     "swap_limbs",
-    "write_bvh",
     "write_depth",
+    "write_bvh",
     "write_depth_png",
     "write_jsonl",
     "write_pfm",
@@ -1337,30 +1337,137 @@ def crf_energy(
     """The CRF energy of ``labels`` (``inf`` if a node has a forbidden label)."""
 
 # ---- stereo -------------------------------------------------------------------------
-# The native stereo checks take any object and name what they refuse; the facade
-# (depthpose.stereo) passes arrays, or lists it could not convert, through to them. The
-# defaults are the facade's; the native signature does not show them (``...`` here).
-def stereo_match(
-    left: object,
-    right: object,
+# depthpose.stereo re-exports these. They take any object and name what they refuse;
+# lists are read as numpy.asarray reads them.
+@overload
+def match(
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    *,
     max_disparity: int | None = None,
-    window: int = ...,
+    window: int = 5,
     threshold: float | None = None,
     num_seeds: int | None = None,
-    seeds: object | None = None,
-    seed: int = ...,
-    lr_check: bool = ...,
-    subpixel: bool = ...,
-    fill_gaps: bool = ...,
+    seeds: npt.ArrayLike | None = None,
+    seed: int = 0,
+    return_confidence: Literal[False] = False,
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+    half_occlusion: bool = True,
     seed_distinctness: float | None = None,
     min_texture: float | None = None,
-    min_segment: int | None = None,
-    similarity: str | None = None,
-    half_occlusion: bool = ...,
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
-def depth_from_disparity(
-    disparity: object, focal: float, baseline: float, doffs: float = ...
 ) -> npt.NDArray[np.float32]: ...
+@overload
+def match(
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    *,
+    max_disparity: int | None = None,
+    window: int = 5,
+    threshold: float | None = None,
+    num_seeds: int | None = None,
+    seeds: npt.ArrayLike | None = None,
+    seed: int = 0,
+    return_confidence: Literal[True],
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+    half_occlusion: bool = True,
+    seed_distinctness: float | None = None,
+    min_texture: float | None = None,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+@overload
+def match(
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    *,
+    max_disparity: int | None = None,
+    window: int = 5,
+    threshold: float | None = None,
+    num_seeds: int | None = None,
+    seeds: npt.ArrayLike | None = None,
+    seed: int = 0,
+    return_confidence: bool = False,
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+    half_occlusion: bool = True,
+    seed_distinctness: float | None = None,
+    min_texture: float | None = None,
+) -> npt.NDArray[np.float32] | tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Disparity of a rectified pair by Growing Correspondence Seeds: left pixel ``x``
+    matches right pixel ``x - d`` (``d >= 0``).
+
+    Parameters
+    ----------
+    left, right : array_like
+        Gray (H, W) or colour (H, W, 3) images, uint8 or float, of one shape.
+    max_disparity : int, optional
+        Largest disparity searched (default: the whole line).
+    window : int
+        Odd side of the correlation window.
+    threshold : float, optional
+        Smallest accepted correlation (default 0.47).
+    num_seeds : int, optional
+        Random seeds matched by exhaustive search.
+    seeds : array_like, optional
+        Extra seeds, (N, 3) rows (x, y, d).
+    seed : int
+        Seed of the random seeds.
+    return_confidence : bool
+        Also return the correlation of each match (NaN unmatched).
+    lr_check : bool
+        Keep only matches confirmed right-to-left (twice the time).
+    subpixel : bool
+        Refine each match to a fraction of a pixel.
+    fill_gaps : bool
+        Fill one-pixel gaps that integer uniqueness leaves on slanted surfaces.
+    min_segment : int, optional
+        Drop matched segments smaller than this many pixels (default 200).
+    similarity : str
+        "mncc" (Moravec's normalised cross-correlation) or "ncc".
+    half_occlusion : bool
+        Drop the matches a nearer surface spreads into the band on its left that the
+        right camera cannot see (within half a window of a match more than 2 px
+        farther on the left).
+    seed_distinctness, min_texture : float, optional
+        Tuning of the seed search (defaults of ``StereoConfig``).
+
+    Returns
+    -------
+    disparity : ndarray
+        (H, W) float32, NaN where unmatched. A uniform (textureless) pair gives an
+        all-NaN result, not an error.
+    confidence : ndarray
+        With ``return_confidence``: (H, W) float32 correlation, NaN where unmatched.
+
+    Raises
+    ------
+    InvalidInputError
+        Images of other shapes, a bad setting (named).
+    ResourceLimitError
+        Images beyond :data:`MAX_IMAGE_PIXELS`.
+    """
+
+def depth_from_disparity(
+    disparity: npt.ArrayLike, focal: float, baseline: float, doffs: float = 0.0
+) -> npt.NDArray[np.float32]:
+    """Depth in metres, Z = baseline·focal / (d + doffs); 0 where there is no
+    disparity.
+
+    Raises
+    ------
+    InvalidInputError
+        A depth beyond the float32 range (a disparity within ~1e-38 of -doffs), or a
+        bad argument.
+    """
 
 # ---- person segmentation ------------------------------------------------------------
 @final

@@ -27,7 +27,6 @@ from ._core import (
 __all__ = [
     "array",
     "brief",
-    "depth_image",
     "integer",
     "mask",
     "number",
@@ -165,17 +164,6 @@ def mask(value: Any, shape: tuple[int, ...], name: str = "mask") -> np.ndarray:
     if kind in "OUSV":
         raise InvalidTypeError(msg)
     raise InvalidInputError(msg)
-
-
-def depth_image(value: Any, name: str = "depth") -> np.ndarray:
-    """A depth image as every native function takes it, converted to float32 metres
-    (uint16 millimetres converted; any memory layout). Refuses what they refuse."""
-    from . import _core
-
-    d = array(value, name, image=1)
-    if d.ndim == 2 and d.dtype.kind in "fu" and not d.flags.c_contiguous:
-        d = np.ascontiguousarray(d)
-    return _core.depth_metres(d, name)
 
 
 def numbers_array(value: Any, name: str, *, ndim: int | None = None) -> np.ndarray:
