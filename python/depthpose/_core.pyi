@@ -81,6 +81,7 @@ __all__ = [
     "write_bvh",
     "write_depth_png",
     "write_jsonl",
+    "write_npz",
     "write_pfm",
     "write_rgb_png",
 ]
@@ -469,6 +470,27 @@ def depth_metres(
     (H, W) float32/float64 metres or uint16 millimetres, C-contiguous, no negative or
     infinite value (0 and NaN: no reading); returned as float32 metres. Errors name
     ``name`` (default "depth")."""
+
+def write_npz(path: str | PathLike[str], **arrays: npt.ArrayLike) -> None:
+    """Writes arrays as an uncompressed ``.npz`` (numpy's zip of ``.npy`` arrays, as
+    ``numpy.savez`` writes it): to a temporary file beside ``path``, synced, then
+    renamed, so that a reader never sees half a file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The archive to write.
+    **arrays : array_like
+        The arrays by key, of plain dtypes (numbers, bools, fixed-width strings).
+
+    Raises
+    ------
+    InvalidInputError
+        An array of an unsupported dtype (an object array is an
+        :class:`InvalidTypeError`), named by its key.
+    FileFormatError
+        The file cannot be written.
+    """
 
 # ---- exports ------------------------------------------------------------------------
 BVH_PARENTS: dict[str, str | None]

@@ -41,6 +41,7 @@ from ._core import (
     read_npz,
     read_pfm,
     write_depth,
+    write_npz,
     write_pfm,
 )
 
@@ -55,6 +56,7 @@ __all__ = [
     "write_pfm",
     "missing_file",
     "read_npz",
+    "write_npz",
     "KINECT_SHAPE",
 ]
 

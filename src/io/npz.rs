@@ -10,7 +10,7 @@
 use super::npy::{self, Kind};
 use super::{existing, io_error, path_str};
 use crate::error::{Error, Result};
-use std::io::{BufReader, BufWriter, Read, Write};
+use std::io::{BufReader, BufWriter, Read};
 use std::path::Path;
 
 /// Reads the arrays of the archive at `path`, in the archive's order: all of them, or
@@ -72,8 +72,8 @@ pub fn read(path: &Path, what: &str, keys: Option<&[String]>) -> Result<Vec<(Str
 }
 
 /// Writes `arrays` (key, array) as an uncompressed archive, as `numpy.savez` does: to
-/// a temporary file beside `path` first, then renamed to it, so that a reader never
-/// sees half a file.
+/// a temporary file beside `path` first, synced, then renamed to it, so that a reader
+/// never sees half a file.
 pub fn write(path: &Path, arrays: &[(&str, &npy::Array)]) -> Result<()> {
     let Some(name) = path.file_name() else {
         return Err(Error::invalid(
@@ -100,7 +100,9 @@ fn write_archive(path: &Path, arrays: &[(&str, &npy::Array)]) -> std::io::Result
         zip.start_file(format!("{key}.npy"), options)?;
         npy::write_to(&mut zip, array)?;
     }
-    zip.finish()?.flush()
+    let file = zip.finish()?.into_inner().map_err(|e| e.into_error())?;
+    // On disk before the rename, so that a crash leaves the old file or the new one.
+    file.sync_all()
 }
 
 #[cfg(test)]

@@ -204,6 +204,49 @@ fn read_npz<'py>(
     read_npz_dict(py, path, what, keys)
 }
 
+/// An array argument as a `.npy` holds it: its dtype (a plain one), shape and bytes
+/// in C order.
+fn numpy_to_npy(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<npy::Array> {
+    let np = obj.py().import("numpy")?;
+    // asarray, not ascontiguousarray, which turns a 0-d array into a 1-d one.
+    let kwargs = PyDict::new(obj.py());
+    kwargs.set_item("order", "C")?;
+    let a = np
+        .call_method("asarray", (obj,), Some(&kwargs))
+        .map_err(|_| invalid(name, "not a rectangular array"))?;
+    let descr: String = a.getattr("dtype")?.getattr("str")?.extract()?;
+    let dtype = npy::Dtype::parse(&descr).map_err(|m| invalid(name, m))?;
+    if dtype.kind == npy::Kind::Object {
+        return Err(wrong_type(
+            name,
+            "an array of plain values",
+            "an object array",
+        ));
+    }
+    let shape: Vec<usize> = a.getattr("shape")?.extract()?;
+    let data: Vec<u8> = a.call_method0("tobytes")?.extract()?;
+    Ok(npy::Array {
+        dtype,
+        shape,
+        fortran: false,
+        data,
+    })
+}
+
+#[pyfunction]
+#[pyo3(signature = (path, **arrays))]
+fn write_npz(py: Python<'_>, path: PathArg, arrays: Option<&Bound<'_, PyDict>>) -> PyResult<()> {
+    let path = self::path(&path, "path")?;
+    let mut entries = Vec::new();
+    for (key, value) in arrays.into_iter().flatten() {
+        let key: String = key.extract()?;
+        let a = numpy_to_npy(&value, &key)?;
+        entries.push((key, a));
+    }
+    let refs: Vec<(&str, &npy::Array)> = entries.iter().map(|(k, a)| (k.as_str(), a)).collect();
+    native(py, || npz::write(&path, &refs))
+}
+
 #[pyfunction]
 #[pyo3(signature = (path, depth, scale=Real::new(0.001)),
        text_signature = "(path, depth, scale=0.001)")]
@@ -256,6 +299,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(write_pfm, m)?)?;
     m.add_function(wrap_pyfunction!(read_npz, m)?)?;
+    m.add_function(wrap_pyfunction!(write_npz, m)?)?;
     m.add_function(wrap_pyfunction!(write_depth_png, m)?)?;
     m.add_function(wrap_pyfunction!(write_rgb_png, m)?)?;
     m.add_function(wrap_pyfunction!(depth_metres, m)?)?;
