@@ -93,3 +93,10 @@ def test_pfm_round_trip_is_exact_and_nan_can_be_inf(tmp_path):
     dpio.write_pfm(tmp_path / "b.pfm", image.astype(np.float64), nan_as_inf=True)
     assert np.isposinf(dpio.read_pfm(tmp_path / "b.pfm")[0, 1])
     refused(lambda: dpio.write_pfm(tmp_path / "c.pfm", image[0]), dp.InvalidInputError, "image")
+
+
+def test_raw_frames_report_a_missing_file_before_the_shape(tmp_path):
+    refused(lambda: dp.read_depth(tmp_path / "none.u16", shape=(0, 3)), dp.MissingFileError)
+    (tmp_path / "d.u16").write_bytes(bytes(12))
+    refused(lambda: dp.read_depth(tmp_path / "d.u16", shape=(0, 3)), dp.InvalidInputError, "shape")
+    np.testing.assert_array_equal(dp.read_depth(tmp_path / "d.u16", shape=[2, 3]), np.zeros((2, 3)))

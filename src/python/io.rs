@@ -55,8 +55,10 @@ fn read_depth<'py>(
     let scale = scale.get("scale")?;
     io::check_depth_scale(scale)?;
     let path = self::path(&path, "path")?;
+    // The shape of a raw frame only, checked once the file is known to exist (a
+    // missing file is reported as such whatever the shape).
     let shape = match shape {
-        Some(s) if io::is_raw(&path) => Some(raw_shape(&s)?),
+        Some(s) if io::is_raw(&path) && path.is_file() => Some(raw_shape(&s)?),
         _ => None,
     };
     let img = native(py, || io::read_depth(&path, scale, shape))?;
