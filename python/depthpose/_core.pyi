@@ -49,6 +49,11 @@ __all__ = [
     "StereoPoseTracker",
     "TemplateDatabase",
     "__version__",
+    "_check_array",
+    "_check_integer",
+    "_check_mask",
+    "_check_number",
+    "_check_numbers",
     "_euler_zxy",
     "alpha_beta_swap",
     "alpha_expansion",
@@ -130,6 +135,40 @@ MIN_DEPTH_SCALE: float
 MAX_DEPTH_SCALE: float
 #: Most labels of a CRF (alpha_expansion, alpha_beta_swap, crf_energy): 1024.
 MAX_LABELS: int
+
+# ---- argument checks (depthpose._validate) ----------------------------------------
+def _check_integer(
+    value: object, name: str, *, low: int | None = None, high: int | None = None
+) -> int:
+    """A Python or numpy integer (not a bool) within [``low``, ``high``] (either end may
+    be open), as an int."""
+
+def _check_number(
+    value: object,
+    name: str,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+) -> float:
+    """A finite Python or numpy real number (not a bool) within [``low``, ``high``]
+    (``low_open``: above ``low``)."""
+
+def _check_array(value: object, name: str, *, image: int = 0) -> npt.NDArray[Any]:
+    """``value`` itself if it is a numpy array within its size limit (not copied): an
+    image (``image`` > 0: H × W at most :data:`MAX_IMAGE_PIXELS`, ``image`` values a
+    pixel) or any other array (:data:`MAX_ARRAY_ELEMENTS`)."""
+
+def _check_mask(
+    value: object, shape: Sequence[int], name: str | None = None
+) -> npt.NDArray[np.bool_]:
+    """A mask of exactly ``shape`` as a C-contiguous bool array: bool, or an integer
+    dtype holding only 0 and 1, of any layout. Strings, floats and other integers are
+    refused rather than cast. ``name`` defaults to "mask"."""
+
+def _check_numbers(value: object, name: str, *, ndim: int | None = None) -> npt.NDArray[np.float64]:
+    """A numeric array (or a list of numbers), any layout, as float64, without NaN or
+    inf."""
 
 # ---- camera -------------------------------------------------------------------------
 @final

@@ -9,6 +9,7 @@
 
 mod body;
 mod camera;
+mod checks;
 mod cloud;
 mod convert;
 mod export;
@@ -191,6 +192,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_FIT_POINTS", convert::MAX_FIT_POINTS)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     camera::register(m)?;
+    checks::register(m)?;
     body::register(m)?;
     cloud::register(m)?;
     export::register(m)?;
