@@ -31,7 +31,7 @@ INT_SCALE = 100
 
 
 def image(h: int, w: int) -> np.ndarray:
-    img = np.asarray(_core.read_gray_image(str(IMAGE)), dtype=np.float64)
+    img = np.asarray(_core.read_image(str(IMAGE)), dtype=np.float64)
     rows = np.arange(h) * img.shape[0] // h
     cols = np.arange(w) * img.shape[1] // w
     return img[np.ix_(rows, cols)]

@@ -76,8 +76,8 @@ def load_pairs(root: Path) -> list[Pair]:
         pairs.append(
             Pair(
                 "cones",
-                _core.read_gray_image(str(cones / "cones_left.tif")),
-                _core.read_gray_image(str(cones / "cones_right.tif")),
+                _core.read_image(str(cones / "cones_left.tif")),
+                _core.read_image(str(cones / "cones_right.tif")),
                 np.where(gt > 0, gt, np.nan).astype(np.float32),
                 64,
             )
@@ -88,8 +88,8 @@ def load_pairs(root: Path) -> list[Pair]:
         pairs.append(
             Pair(
                 "motorcycle",
-                _core.read_gray_image(str(moto / "motorcycle_left.png")),
-                _core.read_gray_image(str(moto / "motorcycle_right.png")),
+                _core.read_image(str(moto / "motorcycle_left.png")),
+                _core.read_image(str(moto / "motorcycle_right.png")),
                 np.where(np.isfinite(gt), gt, np.nan).astype(np.float32),
                 64,
             )

@@ -40,6 +40,7 @@ pub mod cloud;
 mod cpu;
 pub mod descriptor;
 pub mod error;
+pub mod export;
 pub mod fit;
 pub mod graphcut;
 pub mod io;

@@ -220,3 +220,20 @@ def test_jsonl(tmp_path):
     lines = (tmp_path / "r.jsonl").read_text().splitlines()
     assert json.loads(lines[0])["joints"][0] == [1.0, 1.0, 1.0]
     assert json.loads(lines[1])["joints"] is None
+
+
+def test_jsonl_lines_are_what_json_dumps_writes(tmp_path):
+    fields = {"pose": [0.1, 1e-5, float("nan"), -0.0], "name": 'é"x\n', "ok": True,
+              "none": None, "n": 3, "big": 1e300, "nested": {"a": [1, 2.5]}}  # fmt: skip
+
+    class Result:
+        def to_dict(self):
+            return fields
+
+    export.write_jsonl(tmp_path / "r.jsonl", [Result(), None, Result()])
+    want = [json.dumps({"frame": 0, **fields}), json.dumps({"frame": 1, "joints": None}),
+            json.dumps({"frame": 2, **fields})]  # fmt: skip
+    assert (tmp_path / "r.jsonl").read_text().splitlines() == want
+    with pytest.raises(dp.InvalidTypeError, match=r"results\[1\]"):
+        export.write_jsonl(tmp_path / "x.jsonl", [None, object()])
+    assert not (tmp_path / "x.jsonl").exists()

@@ -127,7 +127,7 @@ def test_cli_writes_disparity_and_depth(tmp_path):
     )
     disp = np.load(out)
     assert disp.shape == left.shape and np.isfinite(disp).mean() > 0.7
-    z = _core.read_depth_image(str(depth))
+    z = _core.read_depth(depth)
     ok = np.isfinite(disp) & (disp > 1)
     np.testing.assert_allclose(z[ok], 50.0 / disp[ok], atol=2e-3)
     pfm = tmp_path / "d.pfm"
@@ -139,8 +139,8 @@ def test_cli_writes_disparity_and_depth(tmp_path):
 
 @pytest.mark.skipif(not CONES.is_dir(), reason=f"shared stereo data not found at {CONES}")
 def test_cones_density_and_accuracy():
-    left = _core.read_gray_image(str(CONES / "cones_left.tif"))
-    right = _core.read_gray_image(str(CONES / "cones_right.tif"))
+    left = _core.read_image(str(CONES / "cones_left.tif"))
+    right = _core.read_image(str(CONES / "cones_right.tif"))
     image = pytest.importorskip("PIL.Image", reason="Pillow reads the float ground truth")
     gt = np.array(image.open(CONES / "cones_gt_disp_left.tif"), dtype=np.float32)
     disp = match(left, right, max_disparity=63)

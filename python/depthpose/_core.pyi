@@ -5,13 +5,15 @@
 from collections.abc import Mapping, Sequence
 from os import PathLike
 from pathlib import Path
-from typing import Any, final
+from typing import Any, Literal, final, overload
 
 import numpy as np
 import numpy.typing as npt
 from typing_extensions import Self, disjoint_base
 
 __all__ = [
+    "BVH_NAMES",
+    "BVH_PARENTS",
     "BodyModel",
     "Camera",
     "Candidate",
@@ -23,6 +25,7 @@ __all__ = [
     "InvalidInputError",
     "InvalidTypeError",
     "JOINT_NAMES",
+    "KINECT_SHAPE",
     "MAX_ARRAY_ELEMENTS",
     "MAX_DEPTH_SCALE",
     "MAX_FIT_POINTS",
@@ -46,6 +49,11 @@ __all__ = [
     "StereoPoseTracker",
     "TemplateDatabase",
     "__version__",
+    "_check_array",
+    "_check_integer",
+    "_check_mask",
+    "_check_number",
+    "_check_numbers",
     "_euler_zxy",
     "alpha_beta_swap",
     "alpha_expansion",
@@ -59,20 +67,27 @@ __all__ = [
     "grid_edges",
     "label_all_pixels",
     "make_sequence",
+    "match",
     "mirror_view",
     "motion_pose",
     "pixel_graph",
     "pose_from_joints",
-    "read_depth_image",
+    "read_depth",
     "read_float_image",
-    "read_gray_image",
+    "read_image",
+    "read_npz",
+    "read_pfm",
     "rest_pose_penalty",
     "segment_person",
-    "stereo_match",
     "surface_context",
     "surface_normals",
     "swap_limbs",
+    "write_depth",
+    "write_bvh",
     "write_depth_png",
+    "write_jsonl",
+    "write_npz",
+    "write_pfm",
     "write_rgb_png",
 ]
 
@@ -120,6 +135,40 @@ MIN_DEPTH_SCALE: float
 MAX_DEPTH_SCALE: float
 #: Most labels of a CRF (alpha_expansion, alpha_beta_swap, crf_energy): 1024.
 MAX_LABELS: int
+
+# ---- argument checks (depthpose._validate) ----------------------------------------
+def _check_integer(
+    value: object, name: str, *, low: int | None = None, high: int | None = None
+) -> int:
+    """A Python or numpy integer (not a bool) within [``low``, ``high``] (either end may
+    be open), as an int."""
+
+def _check_number(
+    value: object,
+    name: str,
+    *,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+) -> float:
+    """A finite Python or numpy real number (not a bool) within [``low``, ``high``]
+    (``low_open``: above ``low``)."""
+
+def _check_array(value: object, name: str, *, image: int = 0) -> npt.NDArray[Any]:
+    """``value`` itself if it is a numpy array within its size limit (not copied): an
+    image (``image`` > 0: H × W at most :data:`MAX_IMAGE_PIXELS`, ``image`` values a
+    pixel) or any other array (:data:`MAX_ARRAY_ELEMENTS`)."""
+
+def _check_mask(
+    value: object, shape: Sequence[int], name: str | None = None
+) -> npt.NDArray[np.bool_]:
+    """A mask of exactly ``shape`` as a C-contiguous bool array: bool, or an integer
+    dtype holding only 0 and 1, of any layout. Strings, floats and other integers are
+    refused rather than cast. ``name`` defaults to "mask"."""
+
+def _check_numbers(value: object, name: str, *, ndim: int | None = None) -> npt.NDArray[np.float64]:
+    """A numeric array (or a list of numbers), any layout, as float64, without NaN or
+    inf."""
 
 # ---- camera -------------------------------------------------------------------------
 @final
@@ -300,11 +349,153 @@ def foreground_mask(
     """
 
 # ---- io -----------------------------------------------------------------------------
-def read_depth_image(
-    path: str | PathLike[str], scale: float = 0.001
-) -> npt.NDArray[np.float32]: ...
-def read_gray_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]: ...
-def read_float_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]: ...
+KINECT_SHAPE: tuple[int, int]
+"""The (height, width) :func:`read_depth` assumes for a raw ``.u16`` file: (480, 640),
+Kinect v1."""
+
+def read_depth(
+    path: str | PathLike[str], scale: float = 0.001, shape: tuple[int, int] | None = None
+) -> npt.NDArray[np.float32]:
+    """Reads a depth image as float32 metres (0 or NaN = no reading), the format by the
+    file's suffix (see the table of units in :mod:`depthpose.io`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.png``, ``.tif``/``.tiff``, ``.npy``, ``.pfm`` or raw ``.u16``/``.raw``
+        file.
+    scale : float
+        Metres per integer unit of 16-bit PNG/TIFF, uint16 ``.npy`` and ``.u16``
+        files (default millimetres), in [1e-6, 1]; float formats hold metres.
+    shape : (int, int), optional
+        (height, width) of a raw ``.u16`` file, which holds no header; default
+        :data:`KINECT_SHAPE`. Ignored for other formats.
+
+    Returns
+    -------
+    ndarray
+        (H, W) float32 metres.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist (a ``FileNotFoundError``).
+    FileFormatError
+        The file is unreadable, corrupt or truncated, not a depth image (8-bit or
+        colour, an array of another dtype or dimension, Python objects), holds negative
+        or infinite depth, has an unknown suffix, or (``.u16``) its size is not
+        ``shape``.
+    ResourceLimitError
+        The header or ``shape`` says more than :data:`MAX_IMAGE_PIXELS` pixels (checked
+        before the pixels are read).
+    InvalidInputError
+        ``scale`` or ``shape`` is out of range or of the wrong type.
+    """
+
+def write_depth(
+    path: str | PathLike[str], depth: npt.NDArray[np.generic], scale: float = 0.001
+) -> None:
+    """Writes depth as a 16-bit PNG (units of ``scale`` metres), ``.npy`` or ``.pfm``
+    (float32 metres), the format by the suffix.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A ``.png``, ``.npy`` or ``.pfm`` file.
+    depth : ndarray
+        (H, W) float metres or uint16 millimetres, as every depthpose function takes it
+        (so uint16 input is millimetres in every format); any memory layout.
+    scale : float
+        Metres per unit of a PNG, in [1e-6, 1].
+
+    Raises
+    ------
+    InvalidInputError
+        Another suffix; negative or infinite depth; for PNG, depth the file cannot
+        store (beyond 65535 units, or below half a unit, which would read back as no
+        reading). NaN is written as 0 in a PNG and kept in ``.npy`` and ``.pfm``.
+    """
+
+def read_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """Any PNG/TIFF/JPEG as a gray float32 image: integer types scaled to [0, 1] by
+    their type's maximum, float TIFF as stored, colour converted by luminance.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    FileFormatError
+        The file is not a readable image.
+    """
+
+def read_float_image(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """A float TIFF (its first channel) or any other image as stored, float32."""
+
+def read_pfm(path: str | PathLike[str]) -> npt.NDArray[np.float32]:
+    """A PFM image (``Pf`` gray or ``PF`` colour, its first channel) as float32, top row
+    first; the header is checked before the pixels are read.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    FileFormatError
+        Not a PFM file, a corrupt header, or truncated pixels.
+    ResourceLimitError
+        The header says more than :data:`MAX_IMAGE_PIXELS` pixels.
+    """
+
+def write_pfm(
+    path: str | PathLike[str], image: npt.NDArray[np.generic], *, nan_as_inf: bool = False
+) -> None:
+    """Writes a 2-D image (any real dtype; NaN and inf kept) as little-endian gray PFM.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    image : ndarray
+        (H, W) numbers, any memory layout.
+    nan_as_inf : bool
+        Store NaN as +inf, the Middlebury convention for "unknown".
+
+    Raises
+    ------
+    InvalidInputError
+        Not a non-empty 2-D array of numbers (an object or string array is an
+        :class:`InvalidTypeError`).
+    """
+
+def read_npz(
+    path: str | PathLike[str], what: str = "a .npz archive", keys: list[str] | None = None
+) -> dict[str, npt.NDArray[Any]]:
+    """The arrays of a ``.npz`` file (numpy's zip of ``.npy`` arrays), read without
+    pickles, each of its stored dtype, shape and order.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The archive.
+    what : str
+        What the file should be, for errors ("a depth sequence").
+    keys : list of str, optional
+        Read only these arrays (those the file holds); default all.
+
+    Returns
+    -------
+    dict of str to ndarray
+        The arrays by key, in the archive's order.
+
+    Raises
+    ------
+    MissingFileError
+        The file does not exist.
+    FileFormatError
+        Not a zip archive; an entry with a corrupt header, of Python objects, or
+        truncated or corrupt. Every entry is checked, read or not; the message names
+        the file and says it is not ``what``.
+    """
+
 def write_depth_png(
     path: str | PathLike[str], depth: npt.NDArray[np.generic], scale: float = 0.001
 ) -> None: ...
@@ -318,6 +509,97 @@ def depth_metres(
     (H, W) float32/float64 metres or uint16 millimetres, C-contiguous, no negative or
     infinite value (0 and NaN: no reading); returned as float32 metres. Errors name
     ``name`` (default "depth")."""
+
+def write_npz(path: str | PathLike[str], **arrays: npt.ArrayLike) -> None:
+    """Writes arrays as an uncompressed ``.npz`` (numpy's zip of ``.npy`` arrays, as
+    ``numpy.savez`` writes it): to a temporary file beside ``path``, synced, then
+    renamed, so that a reader never sees half a file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The archive to write.
+    **arrays : array_like
+        The arrays by key, of plain dtypes (numbers, bools, fixed-width strings).
+
+    Raises
+    ------
+    InvalidInputError
+        An array of an unsupported dtype (an object array is an
+        :class:`InvalidTypeError`), named by its key.
+    FileFormatError
+        The file cannot be written.
+    """
+
+# ---- exports ------------------------------------------------------------------------
+BVH_PARENTS: dict[str, str | None]
+"""Parent of each body segment (part names of the body model); None for the root."""
+BVH_NAMES: dict[str, str]
+"""The BVH joint name of each body segment: the names animation tools map by default
+(Blender, MotionBuilder, Mixamo-style retargeting); Left and Right are the subject's."""
+
+def write_bvh(
+    path: str | PathLike[str],
+    model: BodyModel,
+    poses: npt.ArrayLike,
+    fps: float = 30.0,
+    *,
+    confidence: npt.ArrayLike | None = None,
+) -> None:
+    """Writes a tracked sequence as BVH, y up (x = the subject's left, z = towards the
+    camera at the rest pose), metres.
+
+    One joint per body segment at its proximal joint, named as animation tools expect
+    (:data:`BVH_NAMES`: Hips, Spine, Neck, Head, LeftArm, LeftForeArm, LeftHand,
+    LeftUpLeg, LeftLeg, LeftFoot, and the Right ones); each chain ends in an End Site
+    at the far end of its segment. The rest pose is all joint angles zero (segments
+    parallel to the body frame). Each frame holds the root's position and every
+    joint's rotation relative to its parent as Z-X-Y Euler angles in degrees.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    model : BodyModel
+        The body model the poses are of.
+    poses : array_like
+        (T, 22) poses. A failed frame (a pose of 22 NaN, as the estimators record it)
+        repeats the previous frame.
+    fps : float
+        Frames per second, in (0, 1e6].
+    confidence : array_like, optional
+        (T, 15), the estimators' per-joint confidence: a leg whose hip, knee and foot
+        all have confidence 0 in a frame (not seen) is written at rest in that frame
+        rather than with invented angles.
+
+    Raises
+    ------
+    InvalidInputError
+        ``poses`` not (T, 22), holding an infinite value, a frame with some NaN
+        parameters but not all, or every frame NaN; ``fps`` out of range;
+        ``confidence`` of another shape or not finite.
+    InvalidTypeError
+        ``model`` is not a :class:`BodyModel`; an object or string array.
+    """
+
+def write_jsonl(path: str | PathLike[str], results: Sequence[Any]) -> None:
+    """Writes one JSON line per frame, ``{"frame": k, ...}`` with the fields of the
+    frame's ``PoseResult.to_dict()``, or ``{"frame": k, "joints": null}`` for a failed
+    frame (None).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    results : sequence
+        A ``PoseResult`` (anything with ``to_dict()``) or None per frame.
+
+    Raises
+    ------
+    InvalidTypeError
+        An item that is neither None nor has ``to_dict()``, or a value JSON cannot
+        hold.
+    """
 
 # ---- templates ----------------------------------------------------------------------
 def surface_context(
@@ -1116,30 +1398,137 @@ def crf_energy(
     """The CRF energy of ``labels`` (``inf`` if a node has a forbidden label)."""
 
 # ---- stereo -------------------------------------------------------------------------
-# The native stereo checks take any object and name what they refuse; the facade
-# (depthpose.stereo) passes arrays, or lists it could not convert, through to them. The
-# defaults are the facade's; the native signature does not show them (``...`` here).
-def stereo_match(
-    left: object,
-    right: object,
+# depthpose.stereo re-exports these. They take any object and name what they refuse;
+# lists are read as numpy.asarray reads them.
+@overload
+def match(
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    *,
     max_disparity: int | None = None,
-    window: int = ...,
+    window: int = 5,
     threshold: float | None = None,
     num_seeds: int | None = None,
-    seeds: object | None = None,
-    seed: int = ...,
-    lr_check: bool = ...,
-    subpixel: bool = ...,
-    fill_gaps: bool = ...,
+    seeds: npt.ArrayLike | None = None,
+    seed: int = 0,
+    return_confidence: Literal[False] = False,
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+    half_occlusion: bool = True,
     seed_distinctness: float | None = None,
     min_texture: float | None = None,
-    min_segment: int | None = None,
-    similarity: str | None = None,
-    half_occlusion: bool = ...,
-) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
-def depth_from_disparity(
-    disparity: object, focal: float, baseline: float, doffs: float = ...
 ) -> npt.NDArray[np.float32]: ...
+@overload
+def match(
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    *,
+    max_disparity: int | None = None,
+    window: int = 5,
+    threshold: float | None = None,
+    num_seeds: int | None = None,
+    seeds: npt.ArrayLike | None = None,
+    seed: int = 0,
+    return_confidence: Literal[True],
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+    half_occlusion: bool = True,
+    seed_distinctness: float | None = None,
+    min_texture: float | None = None,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]: ...
+@overload
+def match(
+    left: npt.ArrayLike,
+    right: npt.ArrayLike,
+    *,
+    max_disparity: int | None = None,
+    window: int = 5,
+    threshold: float | None = None,
+    num_seeds: int | None = None,
+    seeds: npt.ArrayLike | None = None,
+    seed: int = 0,
+    return_confidence: bool = False,
+    lr_check: bool = False,
+    subpixel: bool = True,
+    fill_gaps: bool = True,
+    min_segment: int | None = None,
+    similarity: str = "mncc",
+    half_occlusion: bool = True,
+    seed_distinctness: float | None = None,
+    min_texture: float | None = None,
+) -> npt.NDArray[np.float32] | tuple[npt.NDArray[np.float32], npt.NDArray[np.float32]]:
+    """Disparity of a rectified pair by Growing Correspondence Seeds: left pixel ``x``
+    matches right pixel ``x - d`` (``d >= 0``).
+
+    Parameters
+    ----------
+    left, right : array_like
+        Gray (H, W) or colour (H, W, 3) images, uint8 or float, of one shape.
+    max_disparity : int, optional
+        Largest disparity searched (default: the whole line).
+    window : int
+        Odd side of the correlation window.
+    threshold : float, optional
+        Smallest accepted correlation (default 0.47).
+    num_seeds : int, optional
+        Random seeds matched by exhaustive search.
+    seeds : array_like, optional
+        Extra seeds, (N, 3) rows (x, y, d).
+    seed : int
+        Seed of the random seeds.
+    return_confidence : bool
+        Also return the correlation of each match (NaN unmatched).
+    lr_check : bool
+        Keep only matches confirmed right-to-left (twice the time).
+    subpixel : bool
+        Refine each match to a fraction of a pixel.
+    fill_gaps : bool
+        Fill one-pixel gaps that integer uniqueness leaves on slanted surfaces.
+    min_segment : int, optional
+        Drop matched segments smaller than this many pixels (default 200).
+    similarity : str
+        "mncc" (Moravec's normalised cross-correlation) or "ncc".
+    half_occlusion : bool
+        Drop the matches a nearer surface spreads into the band on its left that the
+        right camera cannot see (within half a window of a match more than 2 px
+        farther on the left).
+    seed_distinctness, min_texture : float, optional
+        Tuning of the seed search (defaults of ``StereoConfig``).
+
+    Returns
+    -------
+    disparity : ndarray
+        (H, W) float32, NaN where unmatched. A uniform (textureless) pair gives an
+        all-NaN result, not an error.
+    confidence : ndarray
+        With ``return_confidence``: (H, W) float32 correlation, NaN where unmatched.
+
+    Raises
+    ------
+    InvalidInputError
+        Images of other shapes, a bad setting (named).
+    ResourceLimitError
+        Images beyond :data:`MAX_IMAGE_PIXELS`.
+    """
+
+def depth_from_disparity(
+    disparity: npt.ArrayLike, focal: float, baseline: float, doffs: float = 0.0
+) -> npt.NDArray[np.float32]:
+    """Depth in metres, Z = baseline·focal / (d + doffs); 0 where there is no
+    disparity.
+
+    Raises
+    ------
+    InvalidInputError
+        A depth beyond the float32 range (a disparity within ~1e-38 of -doffs), or a
+        bad argument.
+    """
 
 # ---- person segmentation ------------------------------------------------------------
 @final

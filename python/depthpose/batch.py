@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from ._core import DepthPoseError, InvalidInputError
+from ._core import DepthPoseError, InvalidInputError, read_npz, write_npz
 from .sequence import expand_inputs, open_sequence
 
 if TYPE_CHECKING:
@@ -87,31 +87,21 @@ def _chunk_file(out_dir: Path, name: str, start: int, stop: int) -> Path:
     return out_dir / ".chunks" / name / f"{start:07d}-{stop:07d}.npz"
 
 
-def _write_atomic_npz(path: Path, **arrays: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    with open(tmp, "wb") as f:
-        np.savez(f, **arrays)
-        f.flush()
-        os.fsync(f.fileno())
-    os.replace(tmp, path)
-
-
 def _chunk_ok(path: Path, start: int, stop: int) -> bool:
     """A chunk file exists, is complete and covers [start, stop)."""
     if not path.exists():
         return False
     try:
-        with np.load(path, allow_pickle=False) as d:
-            n = stop - start
-            return (
-                int(d["format"]) == CHUNK_FORMAT
-                and int(d["start"]) == start
-                and int(d["stop"]) == stop
-                and d["joints"].shape == (n, JOINTS, 3)
-                and d["pose"].shape == (n, PARAMS)
-                and d["confidence"].shape == (n, JOINTS)
-            )
+        d = read_npz(path, "a chunk file")
+        n = stop - start
+        return (
+            int(d["format"]) == CHUNK_FORMAT
+            and int(d["start"]) == start
+            and int(d["stop"]) == stop
+            and d["joints"].shape == (n, JOINTS, 3)
+            and d["pose"].shape == (n, PARAMS)
+            and d["confidence"].shape == (n, JOINTS)
+        )
     except Exception:  # truncated or corrupt: recompute
         return False
 
@@ -146,8 +136,10 @@ def process_chunk(spec: dict[str, Any]) -> dict[str, Any]:
         warmup=start - lo,
         first_frame=lo,
     )
-    _write_atomic_npz(
-        Path(spec["out"]),
+    out = Path(spec["out"])
+    out.parent.mkdir(parents=True, exist_ok=True)
+    write_npz(
+        out,
         format=np.int64(CHUNK_FORMAT),
         start=np.int64(start),
         stop=np.int64(stop),
@@ -182,14 +174,14 @@ def _merge(
             msg = failed_chunks.get((start, stop), "chunk result missing")
             errors += [{"frame": f, "error": msg} for f in range(start, stop)]
             continue
-        with np.load(path, allow_pickle=False) as d:
-            joints[start:stop] = d["joints"]
-            pose[start:stop] = d["pose"]
-            conf[start:stop] = d["confidence"]
-            errors += json.loads(str(d["errors"]))
+        d = read_npz(path, "a chunk file")
+        joints[start:stop] = d["joints"]
+        pose[start:stop] = d["pose"]
+        conf[start:stop] = d["confidence"]
+        errors += json.loads(str(d["errors"]))
     from .pipeline import JOINT_NAMES
 
-    _write_atomic_npz(
+    write_npz(
         out_dir / f"{name}.npz",
         joints=joints,
         pose=pose,

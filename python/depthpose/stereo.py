@@ -8,142 +8,21 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
-from typing import Literal, overload
 
 import numpy as np
-from numpy.typing import ArrayLike, NDArray
+from numpy.typing import NDArray
 
 from depthpose import _core
 
+from ._core import depth_from_disparity, match
+
 __all__ = ["match", "depth_from_disparity", "cli_stereo", "write_pfm"]
-
-_Pair = tuple[NDArray[np.float32], NDArray[np.float32]]
-
-
-@overload
-def match(
-    left: ArrayLike,
-    right: ArrayLike,
-    *,
-    max_disparity: int | None = ...,
-    window: int = ...,
-    threshold: float | None = ...,
-    num_seeds: int | None = ...,
-    seeds: ArrayLike | None = ...,
-    seed: int = ...,
-    return_confidence: Literal[False] = ...,
-    lr_check: bool = ...,
-    subpixel: bool = ...,
-    fill_gaps: bool = ...,
-    min_segment: int | None = ...,
-    similarity: str = ...,
-    half_occlusion: bool = ...,
-) -> NDArray[np.float32]: ...
-
-
-@overload
-def match(
-    left: ArrayLike,
-    right: ArrayLike,
-    *,
-    max_disparity: int | None = ...,
-    window: int = ...,
-    threshold: float | None = ...,
-    num_seeds: int | None = ...,
-    seeds: ArrayLike | None = ...,
-    seed: int = ...,
-    return_confidence: Literal[True],
-    lr_check: bool = ...,
-    subpixel: bool = ...,
-    fill_gaps: bool = ...,
-    min_segment: int | None = ...,
-    similarity: str = ...,
-    half_occlusion: bool = ...,
-) -> _Pair: ...
-
-
-def match(
-    left: ArrayLike,
-    right: ArrayLike,
-    *,
-    max_disparity: int | None = None,
-    window: int = 5,
-    threshold: float | None = None,
-    num_seeds: int | None = None,
-    seeds: ArrayLike | None = None,
-    seed: int = 0,
-    return_confidence: bool = False,
-    lr_check: bool = False,
-    subpixel: bool = True,
-    fill_gaps: bool = True,
-    min_segment: int | None = None,
-    similarity: str = "mncc",
-    half_occlusion: bool = True,
-) -> NDArray[np.float32] | _Pair:
-    """Disparity (H, W) float32 of a rectified pair, NaN where unmatched.
-
-    ``left``/``right``: gray (H, W) or colour (H, W, 3) arrays, uint8 or float, same shape.
-    ``max_disparity``: largest disparity searched (default: the whole line).
-    ``window``: odd side of the correlation window. ``threshold``: smallest accepted
-    correlation (default 0.47). ``num_seeds``: random seeds matched by exhaustive search.
-    ``seeds``: extra seeds, an (N, 3) array of rows (x, y, d). ``seed``: RNG seed.
-    ``return_confidence``: also return the correlation of each match (NaN unmatched).
-    ``lr_check``: keep only matches confirmed right-to-left (twice the time).
-    ``fill_gaps``: fill one-pixel gaps that integer uniqueness leaves on slanted surfaces.
-    ``min_segment``: drop matched segments smaller than this many pixels (default 200).
-    ``half_occlusion``: drop the matches a nearer surface spreads into the band on its
-    left that the right camera cannot see (within half a window of a match more than
-    2 px farther on the left).
-    A uniform (textureless) pair gives an all-NaN result, not an error.
-    """
-    disparity, confidence = _core.stereo_match(
-        _array(left),
-        _array(right),
-        max_disparity=max_disparity,
-        window=window,
-        threshold=threshold,
-        num_seeds=num_seeds,
-        seeds=None if seeds is None else _array(seeds),
-        seed=seed,
-        lr_check=lr_check,
-        subpixel=subpixel,
-        fill_gaps=fill_gaps,
-        min_segment=min_segment,
-        similarity=similarity,
-        half_occlusion=half_occlusion,
-    )
-    return (disparity, confidence) if return_confidence else disparity
-
-
-def depth_from_disparity(
-    disparity: ArrayLike, focal: float, baseline: float, doffs: float = 0.0
-) -> NDArray[np.float32]:
-    """Depth in metres, Z = baseline·focal / (d + doffs); 0 where there is no disparity."""
-    return _core.depth_from_disparity(_array(disparity), focal, baseline, doffs)
-
-
-def _array(a: ArrayLike) -> object:
-    """Numpy arrays pass through (so the native checks see their dtype and size before
-    any copy); lists and tuples of numbers are converted; anything else passes for the
-    native checks to refuse by name."""
-    if isinstance(a, (list, tuple)):
-        try:
-            return np.asarray(a)
-        except (ValueError, TypeError):
-            return a  # ragged: the native check names it
-    return a
 
 
 def write_pfm(path: str | Path, image: NDArray[np.float32]) -> None:
     """Writes a single-channel float image as PFM (little-endian, bottom row first);
     NaN is stored as +inf, the Middlebury convention for "unknown"."""
-    from . import _validate
-    from .io import write_pfm as _write
-
-    img = _validate.array(image, "image", image=1)
-    if img.dtype.kind != "f":
-        img = _validate.numbers_array(img, "image")
-    _write(path, np.where(np.isnan(img), np.inf, img))
+    _core.write_pfm(path, image, nan_as_inf=True)
 
 
 def _write_disparity(path: Path, disparity: NDArray[np.float32], max_disparity: float) -> None:
@@ -184,8 +63,8 @@ def cli_stereo(argv: list[str]) -> int:
     args = p.parse_args(argv)
     if args.depth_out is not None and (args.focal is None or args.baseline is None):
         p.error("--depth-out needs --focal and --baseline")
-    left = _core.read_gray_image(str(args.left))
-    right = _core.read_gray_image(str(args.right))
+    left = _core.read_image(args.left)
+    right = _core.read_image(args.right)
     disparity = match(
         left,
         right,

@@ -13,13 +13,12 @@ external data. This module adds the sequence files.
 
 from __future__ import annotations
 
-import zipfile
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ._core import MOTIONS, FileFormatError, make_sequence, motion_pose
+from ._core import MOTIONS, make_sequence, motion_pose, read_npz
 
 __all__ = ["MOTIONS", "make_sequence", "save", "load", "motion_pose"]
 
@@ -32,12 +31,4 @@ def save(path: str | Path, seq: dict[str, np.ndarray]) -> None:
 
 def load(path: str | Path) -> dict[str, np.ndarray]:
     """Reads a sequence written by `save` (or a shared synthetic sequence)."""
-    try:
-        with np.load(path, allow_pickle=False) as d:
-            return {k: d[k] for k in d.files}
-    except FileNotFoundError:
-        from .io import missing_file
-
-        raise missing_file(path) from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as e:
-        raise FileFormatError(f"{path}: not a sequence file ({e})") from None
+    return read_npz(path, "a sequence file")

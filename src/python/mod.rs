@@ -9,8 +9,10 @@
 
 mod body;
 mod camera;
+mod checks;
 mod cloud;
 mod convert;
+mod export;
 mod fit;
 mod graphcut;
 mod io;
@@ -190,8 +192,10 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("MAX_FIT_POINTS", convert::MAX_FIT_POINTS)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     camera::register(m)?;
+    checks::register(m)?;
     body::register(m)?;
     cloud::register(m)?;
+    export::register(m)?;
     fit::register(m)?;
     graphcut::register(m)?;
     io::register(m)?;

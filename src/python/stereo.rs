@@ -1,7 +1,7 @@
 //! Stereo matching (Growing Correspondence Seeds) and disparity → depth, for Python.
 
 use super::convert::{
-    f32_array, f64_array, image_f32, invalid, to_numpy, Arr, Flag, Int, Real, Text,
+    array_like, f32_array, f64_array, image_f32, invalid, to_numpy, Arr, Flag, Int, Real, Text,
 };
 use super::native;
 use crate::stereo::{
@@ -88,13 +88,19 @@ fn seeds_of(obj: &Bound<PyAny>) -> PyResult<Vec<Seed>> {
         .collect()
 }
 
-/// Disparity (H, W) float32 (NaN unmatched) and confidence (the correlation of each
-/// accepted match, NaN unmatched) of a rectified pair by Growing Correspondence Seeds.
+/// Disparity (H, W) float32 (NaN unmatched), and with `return_confidence` the
+/// confidence (the correlation of each accepted match, NaN unmatched), of a rectified
+/// pair by Growing Correspondence Seeds. Lists are read as `numpy.asarray` reads them.
 #[pyfunction]
-#[pyo3(signature = (left, right, max_disparity=None, window=Int::new(5), threshold=None, num_seeds=None,
-    seeds=None, seed=Int::new(0), lr_check=Flag::new(false), subpixel=Flag::new(true),
-    fill_gaps=Flag::new(true), seed_distinctness=None, min_texture=None, min_segment=None,
-    similarity=None, half_occlusion=Flag::new(true)))]
+#[pyo3(name = "match", signature = (left, right, *, max_disparity=None, window=Int::new(5),
+    threshold=None, num_seeds=None, seeds=None, seed=Int::new(0),
+    return_confidence=Flag::new(false), lr_check=Flag::new(false), subpixel=Flag::new(true),
+    fill_gaps=Flag::new(true), min_segment=None, similarity=None, half_occlusion=Flag::new(true),
+    seed_distinctness=None, min_texture=None),
+    text_signature = "(left, right, *, max_disparity=None, window=5, threshold=None, \
+    num_seeds=None, seeds=None, seed=0, return_confidence=False, lr_check=False, subpixel=True, \
+    fill_gaps=True, min_segment=None, similarity='mncc', half_occlusion=True, \
+    seed_distinctness=None, min_texture=None)")]
 #[allow(clippy::too_many_arguments)]
 fn stereo_match<'py>(
     py: Python<'py>,
@@ -106,15 +112,16 @@ fn stereo_match<'py>(
     num_seeds: Option<Int>,
     seeds: Option<&Bound<'py, PyAny>>,
     seed: Int,
+    return_confidence: Flag,
     lr_check: Flag,
     subpixel: Flag,
     fill_gaps: Flag,
-    seed_distinctness: Option<Real>,
-    min_texture: Option<Real>,
     min_segment: Option<Int>,
     similarity: Option<Text>,
     half_occlusion: Flag,
-) -> PyResult<(F32Array<'py>, F32Array<'py>)> {
+    seed_distinctness: Option<Real>,
+    min_texture: Option<Real>,
+) -> PyResult<Bound<'py, PyAny>> {
     let d = StereoConfig::default();
     let real = |v: Option<Real>, default: f32, name: &str| -> PyResult<f32> {
         v.map_or(Ok(default), |v| v.get_f32(name))
@@ -139,29 +146,36 @@ fn stereo_match<'py>(
         half_occlusion: half_occlusion.get("half_occlusion")?,
         rng_seed: seed.seed("seed")?,
     };
-    let l = gray_image(left, "left")?;
-    let r = gray_image(right, "right")?;
+    let return_confidence = return_confidence.get("return_confidence")?;
+    let l = gray_image(&array_like(left, "left")?, "left")?;
+    let r = gray_image(&array_like(right, "right")?, "right")?;
     if l.shape != r.shape {
         return Err(invalid(
             "right",
             format!("shape {:?} does not match left {:?}", r.shape, l.shape),
         ));
     }
-    let user = seeds.map(seeds_of).transpose()?.unwrap_or_default();
+    let user = match seeds {
+        Some(s) => seeds_of(&array_like(s, "seeds")?)?,
+        None => Vec::new(),
+    };
     let (h, w) = (l.shape[0], l.shape[1]);
     let res = native(py, || {
         match_stereo_seeded(&l.data, &r.data, h, w, &config, &user)
     })?;
-    Ok((
-        to_numpy(py, res.disparity, &[h, w])?,
-        to_numpy(py, res.confidence, &[h, w])?,
-    ))
+    let disparity = to_numpy(py, res.disparity, &[h, w])?.into_any();
+    if !return_confidence {
+        return Ok(disparity);
+    }
+    let confidence = to_numpy(py, res.confidence, &[h, w])?.into_any();
+    Ok(pyo3::types::PyTuple::new(py, [disparity, confidence])?.into_any())
 }
 
 /// Depth in metres Z = baseline · focal / (d + doffs), 0 where there is no disparity.
 /// A depth beyond the float32 range (a disparity within ~1e-38 of −doffs) is refused.
 #[pyfunction]
-#[pyo3(signature = (disparity, focal, baseline, doffs=Real::new(0.0)))]
+#[pyo3(signature = (disparity, focal, baseline, doffs=Real::new(0.0)),
+       text_signature = "(disparity, focal, baseline, doffs=0.0)")]
 fn depth_from_disparity<'py>(
     py: Python<'py>,
     disparity: &Bound<'py, PyAny>,
@@ -171,7 +185,12 @@ fn depth_from_disparity<'py>(
 ) -> PyResult<F32Array<'py>> {
     let (focal, baseline) = (focal.get("focal")?, baseline.get("baseline")?);
     let doffs = doffs.get("doffs")?;
-    let d = f32_array(disparity, "disparity", Some(2), false)?;
+    let d = f32_array(
+        &array_like(disparity, "disparity")?,
+        "disparity",
+        Some(2),
+        false,
+    )?;
     let z = native(py, || depth_of(&d.data, focal, baseline, doffs))?;
     if let Some(k) = z.iter().position(|v| !v.is_finite()) {
         let w = d.shape[1];

@@ -474,8 +474,8 @@ impl PyTemplateDatabase {
     }
 
     #[staticmethod]
-    fn default_path(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
-        files::default_path(py)
+    fn default_path() -> PyResult<std::path::PathBuf> {
+        files::default_path()
     }
 
     #[staticmethod]

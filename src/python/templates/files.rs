@@ -1,16 +1,20 @@
 //! The template database's `.npz` files and the per-process default database.
 //!
 //! A file holds the arrays of [`TemplateArrays`] as numpy arrays (`format_version` an
-//! integer and `hash` a hex string, both 0-d). numpy writes the archive
-//! (`numpy.savez`, to a temporary file then renamed); `depthpose.io.read_npz` reads it
-//! without pickles and refuses a truncated or corrupt archive. Every entry that is not
-//! what the format says is a `FileFormatError` naming the file and the entry.
+//! integer and `hash` a hex string, both 0-d). [`crate::io::npz`] writes the archive
+//! (to a temporary file, then renamed) and reads it, refusing a truncated or corrupt
+//! archive; the entries reach the checks below as numpy arrays, so that a file numpy
+//! wrote with other dtypes or layouts loads too. Every entry that is not what the
+//! format says is a `FileFormatError` naming the file and the entry.
 
-use super::super::convert::{f32_array, f64_array, i64_array, invalid, to_numpy, Int};
+use super::super::convert::{f32_array, f64_array, i64_array, Int};
+use super::super::io::read_npz_dict;
 use super::super::{native, FileFormatError};
 use super::database::{build_database, PyTemplateDatabase};
 use super::Settings;
 use crate::body::{BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SHAPE_PARAMS};
+use crate::io::npy::{Array, Dtype};
+use crate::io::npz;
 use crate::templates::{TemplateArrays, TemplateConfig, TemplateDatabase};
 use numpy::{PyArrayDescrMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
@@ -24,20 +28,11 @@ use std::sync::Mutex;
 /// without `templates=` shares one instead of loading its own (~0.35 s and ~60 MB).
 static DEFAULTS: Mutex<BTreeMap<PathBuf, Py<PyTemplateDatabase>>> = Mutex::new(BTreeMap::new());
 
-/// Writes `db` to `path` as an `.npz` file: to `<path>.tmp.npz` first, then renamed, so
-/// that a reader never sees half a file.
+/// Writes `db` to `path` as an `.npz` file (atomically: see [`npz::write`]).
 pub(super) fn save(py: Python<'_>, db: &TemplateDatabase, path: &Path) -> PyResult<()> {
-    let Some(name) = path.file_name() else {
-        let shown = path.display().to_string();
-        return Err(invalid("path", format!("{shown:?} names no file")));
-    };
-    let mut tmp_name = name.to_os_string();
-    tmp_name.push(".tmp.npz");
-    let tmp = path.with_file_name(tmp_name);
-    py.import("numpy")?
-        .call_method("savez", (&tmp,), Some(&arrays(py, db)?))?;
-    py.import("os")?.call_method1("replace", (tmp, path))?;
-    Ok(())
+    let entries = arrays(db);
+    let refs: Vec<(&str, &Array)> = entries.iter().map(|(k, a)| (*k, a)).collect();
+    native(py, || npz::write(path, &refs))
 }
 
 /// The database in the `.npz` file at `path`. With `expected` given, a database of
@@ -47,11 +42,9 @@ pub(super) fn load(
     path: &Path,
     expected: Option<&(BodyModel, TemplateConfig)>,
 ) -> PyResult<TemplateDatabase> {
-    let entries = py
-        .import("depthpose.io")?
-        .call_method1("read_npz", (path, "a template database"))?;
+    let entries = read_npz_dict(py, path.to_path_buf(), "a template database", None)?;
     let source = path.display().to_string();
-    let a = template_arrays(entries.cast::<PyDict>()?, &source)?;
+    let a = template_arrays(&entries, &source)?;
     native(py, || {
         TemplateDatabase::from_arrays(&a, expected.map(|(m, c)| (m, c)), &source)
     })
@@ -59,21 +52,21 @@ pub(super) fn load(
 
 /// Where the default database is cached: `$DEPTHPOSE_CACHE` (or `~/.cache/depthpose`)
 /// `/templates-<hash>.npz`, named by the hash of the default model and settings.
-pub(super) fn default_path(py: Python<'_>) -> PyResult<Bound<'_, PyAny>> {
-    let path = py.import("pathlib")?.getattr("Path")?;
-    let root = match py
-        .import("os")?
-        .getattr("environ")?
-        .call_method1("get", ("DEPTHPOSE_CACHE",))?
-    {
-        r if r.is_none() => path
-            .call_method0("home")?
-            .call_method1("joinpath", (".cache", "depthpose"))?,
-        r => path.call1((r,))?,
+pub(super) fn default_path() -> PyResult<PathBuf> {
+    let root = match std::env::var_os("DEPTHPOSE_CACHE") {
+        Some(r) => PathBuf::from(r),
+        None => std::env::home_dir()
+            .ok_or_else(|| {
+                PyErr::new::<pyo3::exceptions::PyRuntimeError, _>(
+                    "no home folder for the template cache; set DEPTHPOSE_CACHE",
+                )
+            })?
+            .join(".cache")
+            .join("depthpose"),
     };
     let (model, cfg) = default_settings()?;
     let digest = TemplateDatabase::settings_hash(&model, &cfg);
-    root.call_method1("joinpath", (format!("templates-{digest:016x}.npz"),))
+    Ok(root.join(format!("templates-{digest:016x}.npz")))
 }
 
 /// The default model and template settings.
@@ -84,7 +77,7 @@ fn default_settings() -> PyResult<(BodyModel, TemplateConfig)> {
 /// The database of the default model and settings, cached at [`default_path`]: built
 /// (and saved) on first use, loaded once per process and cache path.
 pub(super) fn default(py: Python<'_>, progress: bool) -> PyResult<Py<PyTemplateDatabase>> {
-    let path: PathBuf = default_path(py)?.extract()?;
+    let path = default_path()?;
     let mut loaded = DEFAULTS
         .lock_py_attached(py)
         .unwrap_or_else(|poisoned| poisoned.into_inner());
@@ -119,37 +112,36 @@ fn load_or_build(py: Python<'_>, path: &Path, progress: bool) -> PyResult<Templa
     Ok(db)
 }
 
-/// The entries of `db`'s file.
-fn arrays<'py>(py: Python<'py>, db: &TemplateDatabase) -> PyResult<Bound<'py, PyDict>> {
+/// The entries of `db`'s file, by key.
+fn arrays(db: &TemplateDatabase) -> Vec<(&'static str, Array)> {
     let a = db.to_arrays();
     let t = db.len();
     let s = a.counts.iter().sum::<i64>() as usize;
     let dim = db.config.descriptor.dim();
-    let d = PyDict::new(py);
-    d.set_item("format_version", a.format_version)?;
-    d.set_item("hash", format!("{:016x}", a.hash))?;
-    d.set_item("shape", to_numpy(py, a.shape, &[NUM_SHAPE_PARAMS])?)?;
-    let nc = a.config.len();
-    d.set_item("config", to_numpy(py, a.config, &[nc])?)?;
-    d.set_item("poses", to_numpy(py, a.poses, &[t, NUM_PARAMS])?)?;
-    d.set_item("views", to_numpy(py, a.views, &[t])?)?;
-    d.set_item("joints", to_numpy(py, a.joints, &[t, NUM_JOINTS, 3])?)?;
-    d.set_item("centroids", to_numpy(py, a.centroids, &[t, 3])?)?;
-    d.set_item("sizes", to_numpy(py, a.sizes, &[t])?)?;
-    d.set_item("counts", to_numpy(py, a.counts, &[t])?)?;
-    d.set_item("context_scale", to_numpy(py, a.context_scale, &[t])?)?;
-    d.set_item(
-        "context_centroid",
-        to_numpy(py, a.context_centroid, &[t, 2])?,
-    )?;
-    d.set_item("context_points", to_numpy(py, a.context_points, &[t])?)?;
-    d.set_item("sample_pixels", to_numpy(py, a.sample_pixels, &[s, 2])?)?;
-    d.set_item(
-        "sample_positions",
-        to_numpy(py, a.sample_positions, &[s, 2])?,
-    )?;
-    d.set_item("descriptors", to_numpy(py, a.descriptors, &[s, dim])?)?;
-    Ok(d)
+    let f64s = |v: &[f64], shape: Vec<usize>| Array::of(Dtype::F64, shape, v, f64::to_le_bytes);
+    let f32s = |v: &[f32], shape: Vec<usize>| Array::of(Dtype::F32, shape, v, f32::to_le_bytes);
+    let i64s = |v: &[i64], shape: Vec<usize>| Array::of(Dtype::I64, shape, v, i64::to_le_bytes);
+    vec![
+        (
+            "format_version",
+            i64s(&[i64::from(a.format_version)], vec![]),
+        ),
+        ("hash", Array::text(&format!("{:016x}", a.hash))),
+        ("shape", f64s(&a.shape, vec![NUM_SHAPE_PARAMS])),
+        ("config", f64s(&a.config, vec![a.config.len()])),
+        ("poses", f64s(&a.poses, vec![t, NUM_PARAMS])),
+        ("views", i64s(&a.views, vec![t])),
+        ("joints", f64s(&a.joints, vec![t, NUM_JOINTS, 3])),
+        ("centroids", f64s(&a.centroids, vec![t, 3])),
+        ("sizes", f64s(&a.sizes, vec![t])),
+        ("counts", i64s(&a.counts, vec![t])),
+        ("context_scale", f64s(&a.context_scale, vec![t])),
+        ("context_centroid", f64s(&a.context_centroid, vec![t, 2])),
+        ("context_points", i64s(&a.context_points, vec![t])),
+        ("sample_pixels", f32s(&a.sample_pixels, vec![s, 2])),
+        ("sample_positions", f32s(&a.sample_positions, vec![s, 2])),
+        ("descriptors", f32s(&a.descriptors, vec![s, dim])),
+    ]
 }
 
 /// The database's arrays from the entries of its file (`source` names it in errors).

@@ -1,74 +1,11 @@
-//! Reading and writing images: 16-bit depth PNG/TIFF, float TIFF, raw `.u16`, and gray
-//! images for stereo. Decoding uses the `image` crate (PNG, TIFF, JPEG only).
+//! Images: 16-bit depth PNG/TIFF, float TIFF, and gray images for stereo. Decoding
+//! uses the `image` crate (PNG, TIFF, JPEG only) and, for one-channel float TIFF, the
+//! `tiff` crate.
 
+use super::{check_depth_scale, check_size, existing, path_str, Image};
 use crate::error::{brief, Error, Result};
 use image::{DynamicImage, ImageDecoder, ImageError, ImageReader};
 use std::path::Path;
-
-/// Largest image read, written or rendered (height × width): 2^23 pixels, e.g.
-/// 4096 × 2048.
-pub const MAX_IMAGE_PIXELS: usize = 1 << 23;
-/// Smallest metres-per-unit scale of an integer depth file (a micrometre).
-pub const MIN_DEPTH_SCALE: f64 = 1e-6;
-/// Largest metres-per-unit scale of an integer depth file (a metre).
-pub const MAX_DEPTH_SCALE: f64 = 1.0;
-
-/// A decoded single-channel image, row-major.
-#[derive(Debug, Clone)]
-pub struct Image {
-    pub data: Vec<f32>,
-    pub height: usize,
-    pub width: usize,
-}
-
-fn path_str(path: &Path) -> String {
-    path.display().to_string()
-}
-
-/// Refuses a depth scale (metres per integer unit) outside
-/// [[`MIN_DEPTH_SCALE`], [`MAX_DEPTH_SCALE`]].
-pub fn check_depth_scale(scale: f64) -> Result<()> {
-    if scale.is_finite() && (MIN_DEPTH_SCALE..=MAX_DEPTH_SCALE).contains(&scale) {
-        Ok(())
-    } else {
-        Err(Error::invalid(
-            "scale",
-            format!(
-                "metres per unit must be in [{}, {}] (0.001 for millimetres), got {}",
-                brief(MIN_DEPTH_SCALE),
-                brief(MAX_DEPTH_SCALE),
-                brief(scale)
-            ),
-        ))
-    }
-}
-
-/// Refuses an image of more than [`MAX_IMAGE_PIXELS`] pixels.
-fn check_size(path: &Path, width: u64, height: u64) -> Result<()> {
-    if width.saturating_mul(height) > MAX_IMAGE_PIXELS as u64 {
-        return Err(Error::resource_limit(
-            path_str(path),
-            format!(
-                "an image of {width}x{height} pixels exceeds the limit MAX_IMAGE_PIXELS = \
-                 {MAX_IMAGE_PIXELS}"
-            ),
-        ));
-    }
-    Ok(())
-}
-
-/// The file at `path`: an error for a missing file or a folder.
-fn existing(path: &Path) -> Result<()> {
-    match std::fs::metadata(path) {
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Err(Error::not_found(path_str(path))),
-        Err(e) => Err(Error::file(path_str(path), format!("cannot open: {e}"))),
-        Ok(m) if m.is_dir() => Err(Error::file(
-            path_str(path),
-            "is a directory, not an image file",
-        )),
-        Ok(_) => Ok(()),
-    }
-}
 
 fn decode_error(path: &Path, e: ImageError) -> Error {
     match e {
@@ -99,7 +36,7 @@ fn plain(e: &dyn std::fmt::Display) -> String {
 }
 
 fn open(path: &Path) -> Result<DynamicImage> {
-    existing(path)?;
+    existing(path, "an image file")?;
     if let Some(img) = read_gray_float_tiff(path)? {
         return Ok(img);
     }
@@ -183,7 +120,7 @@ fn is_gray(buf: &image::Rgb32FImage) -> bool {
 /// millimetres with the default 0.001) or a one-channel 32/64-bit float TIFF (metres,
 /// `scale` ignored). An 8-bit or colour image is refused: it cannot hold depth.
 /// Float depth must not be negative or infinite (NaN and 0 mean "no reading").
-pub fn read_depth(path: &Path, scale: f64) -> Result<Image> {
+pub fn read_depth_image(path: &Path, scale: f64) -> Result<Image> {
     check_depth_scale(scale)?;
     let img = open(path)?;
     let (width, height) = (img.width() as usize, img.height() as usize);
@@ -405,7 +342,9 @@ pub fn write_rgb_png(path: &Path, rgb: &[u8], height: usize, width: usize) -> Re
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
+    use super::super::tests::{fuzz_cases, temp_dir};
+    use super::super::MAX_IMAGE_PIXELS;
     use super::*;
 
     #[test]
@@ -414,7 +353,7 @@ pub(crate) mod tests {
         let p = dir.join("d.png");
         let depth = vec![0.0, 1.234, 2.5, f32::NAN, 65.535, 3.0];
         write_depth_png(&p, &depth, 2, 3, 0.001).unwrap();
-        let back = read_depth(&p, 0.001).unwrap();
+        let back = read_depth_image(&p, 0.001).unwrap();
         assert_eq!((back.height, back.width), (2, 3));
         let want = [0.0, 1.234, 2.5, 0.0, 65.535, 3.0];
         for (a, b) in back.data.iter().zip(want) {
@@ -423,7 +362,7 @@ pub(crate) mod tests {
         // An 8-bit picture is refused as depth but reads as gray.
         let q = dir.join("g.png");
         write_rgb_png(&q, &[255u8; 18], 2, 3).unwrap();
-        assert!(read_depth(&q, 0.001)
+        assert!(read_depth_image(&q, 0.001)
             .unwrap_err()
             .to_string()
             .contains("not a depth image"));
@@ -433,12 +372,12 @@ pub(crate) mod tests {
         let bytes = std::fs::read(&p).unwrap();
         let t = dir.join("t.png");
         std::fs::write(&t, &bytes[..bytes.len() / 2]).unwrap();
-        assert!(read_depth(&t, 0.001)
+        assert!(read_depth_image(&t, 0.001)
             .unwrap_err()
             .to_string()
             .contains("corrupt"));
         assert!(matches!(
-            read_depth(&dir.join("missing.png"), 0.001),
+            read_depth_image(&dir.join("missing.png"), 0.001),
             Err(Error::NotFound { .. })
         ));
         std::fs::remove_dir_all(&dir).ok();
@@ -459,11 +398,11 @@ pub(crate) mod tests {
         assert!(write_depth_png(&p, &[f32::INFINITY], 1, 1, 0.001).is_err());
         // A larger scale stores it; NaN is written as 0 (no reading).
         write_depth_png(&p, &[65.6, f32::NAN], 1, 2, 0.01).unwrap();
-        let back = read_depth(&p, 0.01).unwrap();
+        let back = read_depth_image(&p, 0.01).unwrap();
         assert!((back.data[0] - 65.6).abs() < 1e-4 && back.data[1] == 0.0);
         for scale in [0.0, -1.0, 1e-9, 10.0, f64::NAN] {
             assert!(write_depth_png(&p, &[1.0], 1, 1, scale).is_err(), "{scale}");
-            assert!(read_depth(&p, scale).is_err(), "{scale}");
+            assert!(read_depth_image(&p, scale).is_err(), "{scale}");
         }
         std::fs::remove_dir_all(&dir).ok();
     }
@@ -474,7 +413,10 @@ pub(crate) mod tests {
         let p = dir.join("d.tif");
         let depth = [0.0f32, 1.5, f32::NAN, 2.25, 7.0, 0.5];
         write_gray_f32_tiff(&p, &depth, 3, 2);
-        for img in [read_depth(&p, 0.001).unwrap(), read_float(&p).unwrap()] {
+        for img in [
+            read_depth_image(&p, 0.001).unwrap(),
+            read_float(&p).unwrap(),
+        ] {
             assert_eq!((img.height, img.width), (2, 3));
             for (a, b) in img.data.iter().zip(depth) {
                 assert!(a == &b || (a.is_nan() && b.is_nan()), "{a} vs {b}");
@@ -482,21 +424,11 @@ pub(crate) mod tests {
         }
         assert_eq!(read_gray(&p).unwrap().data[1], 1.5);
         write_gray_f32_tiff(&p, &[1.0, -2.0], 2, 1);
-        assert!(read_depth(&p, 0.001)
+        assert!(read_depth_image(&p, 0.001)
             .unwrap_err()
             .to_string()
             .contains("-2"));
         std::fs::remove_dir_all(&dir).ok();
-    }
-
-    fn temp_dir(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!(
-            "depthpose-io-{name}-{}-{:?}",
-            std::process::id(),
-            std::thread::current().id()
-        ));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir
     }
 
     fn write_gray_f32_tiff(path: &Path, data: &[f32], width: u32, height: u32) {
@@ -504,15 +436,6 @@ pub(crate) mod tests {
         let mut enc = tiff::encoder::TiffEncoder::new(f).unwrap();
         enc.write_image::<tiff::encoder::colortype::Gray32Float>(width, height, data)
             .unwrap();
-    }
-
-    /// Cases of the file-format fuzz tests: `DEPTHPOSE_FUZZ_CASES`, else `default`
-    /// (see docs/robustness.md for a longer run).
-    pub(crate) fn fuzz_cases(default: u32) -> u32 {
-        std::env::var("DEPTHPOSE_FUZZ_CASES")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(default)
     }
 
     /// Valid files of every kind the readers take, as bytes: 16-bit PNG, 8-bit RGB PNG,
@@ -569,7 +492,7 @@ pub(crate) mod tests {
             for name in ["f.png", "f.tif"] {
                 let p = dir.join(name);
                 std::fs::write(&p, &bytes).unwrap();
-                for r in [read_depth(&p, 0.001), read_gray(&p), read_float(&p)] {
+                for r in [read_depth_image(&p, 0.001), read_gray(&p), read_float(&p)] {
                     match r {
                         Ok(img) => {
                             prop_assert_eq!(img.data.len(), img.height * img.width);
@@ -598,7 +521,7 @@ pub(crate) mod tests {
             let w = depth.len();
             match write_depth_png(&p, &depth, 1, w, scale) {
                 Ok(()) => {
-                    let back = read_depth(&p, scale).unwrap();
+                    let back = read_depth_image(&p, scale).unwrap();
                     for (&a, &z) in back.data.iter().zip(&depth) {
                         let want = if z.is_nan() { 0.0 } else { z as f64 };
                         prop_assert!((a as f64 - want).abs() <= 0.5 * scale + 1e-6 * want);
