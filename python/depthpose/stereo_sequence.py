@@ -21,9 +21,15 @@ from typing import Union
 import numpy as np
 import numpy.typing as npt
 
-from ._core import Camera, DepthPoseError, FileFormatError, InvalidInputError, InvalidTypeError
+from ._core import (
+    Camera,
+    DepthPoseError,
+    FileFormatError,
+    InvalidInputError,
+    InvalidTypeError,
+    _sequence_camera,
+)
 from .io import missing_file, read_image, read_npz
-from .sequence import _camera
 
 PathLike = Union[str, "os.PathLike[str]"]
 
@@ -197,7 +203,7 @@ def open_stereo(
     if not (np.isfinite(baseline) and baseline > 0):
         raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
     hw = (int(shape[0]), int(shape[1]))
-    cam = _camera(intrinsics, hw, p, camera)
+    cam = _sequence_camera(hw, p, camera=camera, intrinsics=intrinsics)
     return StereoSequence(
         p, name, kind, n, cam, float(baseline), float(doffs or 0.0), bg, gt, files
     )
