@@ -59,6 +59,7 @@ __all__ = [
     "_check_numbers",
     "_euler_zxy",
     "_sequence_camera",
+    "_stereo_pairs",
     "alpha_beta_swap",
     "alpha_expansion",
     "crf_energy",
@@ -664,6 +665,25 @@ def _sequence_camera(
     or ``intrinsics`` as :func:`open_sequence` resolves it (for
     ``depthpose.stereo_sequence``). Raises as :func:`open_sequence` does for these
     arguments."""
+
+def _stereo_pairs(
+    folder: str | PathLike[str],
+) -> tuple[list[tuple[Path, Path]], tuple[Path, Path] | None]:
+    """The rectified stereo pairs of a folder (for ``depthpose.stereo_sequence``),
+    sorted by the left image's name, and its empty-scene pair when both files exist.
+
+    The pairs are either in subfolders ``left/`` and ``right/`` (the same file names;
+    the empty scene ``background.png`` in each) or side by side, each left image's name
+    containing ``left`` (any case) and its partner's the same name with the last
+    ``left`` turned into ``right`` (the empty scene ``left_bg.png`` and
+    ``right_bg.png``). Images: ``.png``, ``.tif``, ``.tiff``, ``.jpg``, ``.jpeg``,
+    ``.bmp``, ``.pgm``, ``.ppm``.
+
+    Raises
+    ------
+    FileFormatError
+        No pairs inside, or the right image of a pair is missing.
+    """
 
 def open_sequence(
     path: str | PathLike[str],

@@ -204,6 +204,29 @@ fn _sequence_camera(
     camera_of(py, source, shape, &pathlib(py, &path)?.str()?.to_string())
 }
 
+/// The stereo pairs of a folder and its empty-scene pair, as `pathlib.Path`s (for
+/// `depthpose.stereo_sequence`).
+#[pyfunction]
+fn _stereo_pairs(py: Python<'_>, folder: PathArg) -> PyResult<(Py<PyList>, Py<PyAny>)> {
+    let folder = folder.get("folder")?;
+    let (pairs, bg) = native(py, || sequence::stereo::folder_pairs(&folder))?;
+    let pair = |(l, r): &(PathBuf, PathBuf)| -> PyResult<Py<PyAny>> {
+        Ok((pathlib(py, l)?, pathlib(py, r)?)
+            .into_pyobject(py)?
+            .into_any()
+            .unbind())
+    };
+    let list = PyList::empty(py);
+    for p in &pairs {
+        list.append(pair(p)?)?;
+    }
+    let bg = match &bg {
+        Some(p) => pair(p)?,
+        None => py.None(),
+    };
+    Ok((list.unbind(), bg))
+}
+
 #[pymethods]
 impl PySequence {
     #[getter]
@@ -358,5 +381,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyFrames>()?;
     m.add_function(wrap_pyfunction!(open_sequence, m)?)?;
     m.add_function(wrap_pyfunction!(_sequence_camera, m)?)?;
+    m.add_function(wrap_pyfunction!(_stereo_pairs, m)?)?;
     Ok(())
 }

@@ -7,10 +7,13 @@
 //! for one frame of a folder, so that one corrupt, truncated or odd-sized frame is
 //! that frame's error, not the sequence's. The camera is the caller's to resolve
 //! (from the intrinsics given, the ones a `.npz` holds, or a camera given).
+//!
+//! [`stereo`] finds the rectified stereo pairs of a folder, for the stereo sequences.
 
 pub mod folder;
 pub mod npz;
 pub mod pattern;
+pub mod stereo;
 
 use crate::error::{Error, Result};
 use crate::io::{self, path_str, Image};
