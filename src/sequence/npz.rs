@@ -28,6 +28,17 @@ fn not_depth(path: &Path, dtype: npy::Dtype) -> Error {
     )
 }
 
+/// A float as Python prints it: `nan`, `inf`, `-1.0`, `0.5` (shortened as [`brief`]
+/// shortens it).
+fn python_float(v: f64) -> String {
+    match brief(v) {
+        _ if v.is_nan() => "nan".into(),
+        _ if v.is_infinite() => if v > 0.0 { "inf" } else { "-inf" }.into(),
+        s if s.contains(['.', 'e']) => s,
+        s => s + ".0",
+    }
+}
+
 /// Opens the `.npz` at `path`: its frame count and size from the `depth` header, and
 /// the other arrays. `depth_scale` converts a uint16 `background` to metres.
 pub fn open(path: &Path, depth_scale: f64) -> Result<Sequence> {
@@ -98,7 +109,7 @@ pub fn open(path: &Path, depth_scale: f64) -> Result<Sequence> {
     if !(fps.is_finite() && fps > 0.0) {
         return Err(file_err(format!(
             "'fps' must be a positive number, got {}",
-            brief(fps)
+            python_float(fps)
         )));
     }
     let background = match array("background") {
@@ -263,7 +274,7 @@ mod tests {
             &[("depth", ints)],
             "depth must be uint16 or float, got int64",
         );
-        for (fps, want) in [(0.0, "got 0"), (f64::NAN, "got NaN"), (-1.0, "got -1")] {
+        for (fps, want) in [(0.0, "got 0.0"), (f64::NAN, "got nan"), (-1.0, "got -1.0")] {
             let fps = Array::of(Dtype::F64, vec![], &[fps], f64::to_le_bytes);
             check(&[("depth", depth_u16(1, 2, 2)), ("fps", fps)], want);
         }
