@@ -48,6 +48,7 @@ pub mod pipeline;
 pub mod pool;
 pub mod render;
 pub mod segment;
+pub mod sequence;
 mod simd;
 pub mod stereo;
 pub mod synth;

@@ -2,7 +2,8 @@
 # by mypy.stubtest (.ci/run, with .ci/stubtest_allowlist.txt) and tests/test_stub.py. The
 # native classes cannot be subclassed (@final); their constructors are __new__, as the
 # native types define them.
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping
+from collections.abc import Sequence as _Sequence
 from os import PathLike
 from pathlib import Path
 from typing import Any, Literal, final, overload
@@ -44,6 +45,8 @@ __all__ = [
     "PoseTracker",
     "ResourceLimitError",
     "Segmentation",
+    "Sequence",
+    "SequenceFrames",
     "ShapeFitResult",
     "StereoPoseEstimator",
     "StereoPoseTracker",
@@ -55,6 +58,8 @@ __all__ = [
     "_check_number",
     "_check_numbers",
     "_euler_zxy",
+    "_sequence_camera",
+    "_stereo_pairs",
     "alpha_beta_swap",
     "alpha_expansion",
     "crf_energy",
@@ -70,6 +75,7 @@ __all__ = [
     "match",
     "mirror_view",
     "motion_pose",
+    "open_sequence",
     "pixel_graph",
     "pose_from_joints",
     "read_depth",
@@ -160,7 +166,7 @@ def _check_array(value: object, name: str, *, image: int = 0) -> npt.NDArray[Any
     pixel) or any other array (:data:`MAX_ARRAY_ELEMENTS`)."""
 
 def _check_mask(
-    value: object, shape: Sequence[int], name: str | None = None
+    value: object, shape: _Sequence[int], name: str | None = None
 ) -> npt.NDArray[np.bool_]:
     """A mask of exactly ``shape`` as a C-contiguous bool array: bool, or an integer
     dtype holding only 0 and 1, of any layout. Strings, floats and other integers are
@@ -531,6 +537,219 @@ def write_npz(path: str | PathLike[str], **arrays: npt.ArrayLike) -> None:
         The file cannot be written.
     """
 
+# ---- sequences (depthpose.sequence) ----------------------------------------------------
+@final
+class Sequence:
+    """A depth sequence on disk, from :func:`open_sequence`: what its files say about
+    it; its frames are read on demand with :meth:`frames` or :meth:`iter_frames`.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The ``.npz``, the folder or the image.
+    name : str
+        The folder's name or the file's stem.
+    kind : {"npz", "folder", "image"}
+        What the sequence is on disk.
+    n_frames : int
+        Number of frames.
+    camera : Camera
+        The camera of the frames (of their size).
+    depth_scale : float
+        Metres per integer unit of the depth files.
+    background : ndarray of float32 or None
+        The empty scene in metres: a folder's ``background.png`` or a ``.npz``'s
+        ``background``.
+    gt_joints : ndarray of float64 or None
+        The ground-truth joints a ``.npz`` holds (``joints``, (T, 15, 3)).
+    fps : float
+        Frames a second: a ``.npz``'s ``fps``, else 30.
+    files : list of pathlib.Path
+        The frame files of a folder (sorted by name) or the image; empty for a
+        ``.npz``.
+    """
+
+    @property
+    def path(self) -> Path: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def kind(self) -> Literal["npz", "folder", "image"]: ...
+    @property
+    def n_frames(self) -> int: ...
+    @property
+    def camera(self) -> Camera: ...
+    @property
+    def depth_scale(self) -> float: ...
+    @property
+    def background(self) -> npt.NDArray[np.float32] | None: ...
+    @property
+    def gt_joints(self) -> npt.NDArray[np.float64] | None: ...
+    @property
+    def fps(self) -> float: ...
+    @property
+    def files(self) -> list[Path]: ...
+    def frames(self, start: int = 0, stop: int | None = None) -> npt.NDArray[np.float32]:
+        """Depth frames [start, stop) as float32 metres, read with the GIL released. A
+        frame that cannot be read raises its error (see :meth:`iter_frames` for reading
+        around it).
+
+        Parameters
+        ----------
+        start : int
+            The first frame, >= 0.
+        stop : int, optional
+            One past the last frame (at most :attr:`n_frames`, the default).
+
+        Returns
+        -------
+        ndarray of float32, shape (k, H, W)
+            The frames in metres (k = stop - start, possibly 0).
+
+        Raises
+        ------
+        InvalidInputError
+            ``start`` or ``stop`` not an integer >= 0, or ``start`` after ``stop``.
+        MissingFileError
+            A frame's file is gone.
+        FileFormatError
+            A frame cannot be read, or is not of the sequence's size.
+        """
+
+    def iter_frames(self, start: int = 0, stop: int | None = None) -> SequenceFrames:
+        """Each frame of [start, stop) in order, read one at a time (a ``.npz``'s
+        frames at once, on the first step): ``(index, frame)``, the frame being the
+        depth (H, W) float32 metres or the :class:`DepthPoseError` (a
+        ``MissingFileError`` or ``FileFormatError``) that reading it raised, so that
+        one bad frame does not stop the others.
+
+        Parameters
+        ----------
+        start : int
+            The first frame, >= 0.
+        stop : int, optional
+            One past the last frame (at most :attr:`n_frames`, the default).
+
+        Returns
+        -------
+        SequenceFrames
+            An iterator of ``(index, frame or error)``.
+
+        Raises
+        ------
+        InvalidInputError
+            ``start`` or ``stop`` not an integer >= 0, or ``start`` after ``stop``
+            (when called). A ``.npz`` that can no longer be read raises its error on
+            the first step.
+        """
+
+    def frame_name(self, k: int) -> str:
+        """How messages name frame ``k``: its file, or ``path[k]`` (its index in the
+        ``.npz``)."""
+
+@final
+class SequenceFrames:
+    """The iterator of :meth:`Sequence.iter_frames`: ``(index, frame or error)``."""
+
+    def __iter__(self) -> Self: ...
+    def __next__(self) -> tuple[int, npt.NDArray[np.float32] | DepthPoseError]: ...
+
+def _sequence_camera(
+    shape: tuple[int, int],
+    path: str | PathLike[str],
+    *,
+    camera: Camera | Callable[[tuple[int, int]], Camera] | None = None,
+    intrinsics: npt.ArrayLike | None = None,
+) -> Camera:
+    """The camera of frames of ``shape`` (H, W) at ``path``, resolved from ``camera``
+    or ``intrinsics`` as :func:`open_sequence` resolves it (for
+    ``depthpose.stereo_sequence``). Raises as :func:`open_sequence` does for these
+    arguments."""
+
+def _stereo_pairs(
+    folder: str | PathLike[str],
+) -> tuple[list[tuple[Path, Path]], tuple[Path, Path] | None]:
+    """The rectified stereo pairs of a folder (for ``depthpose.stereo_sequence``),
+    sorted by the left image's name, and its empty-scene pair when both files exist.
+
+    The pairs are either in subfolders ``left/`` and ``right/`` (the same file names;
+    the empty scene ``background.png`` in each) or side by side, each left image's name
+    containing ``left`` (any case) and its partner's the same name with the last
+    ``left`` turned into ``right`` (the empty scene ``left_bg.png`` and
+    ``right_bg.png``). Images: ``.png``, ``.tif``, ``.tiff``, ``.jpg``, ``.jpeg``,
+    ``.bmp``, ``.pgm``, ``.ppm``.
+
+    Raises
+    ------
+    FileFormatError
+        No pairs inside, or the right image of a pair is missing.
+    """
+
+def open_sequence(
+    path: str | PathLike[str],
+    *,
+    intrinsics: npt.ArrayLike | None = None,
+    depth_scale: float = 0.001,
+    camera: Camera | Callable[[tuple[int, int]], Camera] | None = None,
+    pattern: str | None = None,
+) -> Sequence:
+    """Opens a depth sequence: a ``.npz``, a folder of depth frames or one depth
+    image. The files are read with the GIL released; a frame is read when asked for.
+
+    A ``.npz`` holds ``depth`` (T, H, W) uint16 (units of ``depth_scale``) or float
+    (metres), and optionally ``intrinsics`` [fx, fy, cx, cy], ``background`` (H, W),
+    ``joints`` (T, 15, 3) and ``fps``; only the header of ``depth`` is read here. A
+    folder's frames are its files with a depth-image suffix (``.png``, ``.tif``,
+    ``.tiff``, ``.npy``, ``.pfm``, ``.u16``) or those ``pattern`` matches, sorted by
+    name; ``background.png`` among them is the empty scene, not a frame. The frames'
+    size is that of most of the first three readable frames, so that one stray image
+    of another size is a failed frame, not the size.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The ``.npz``, the folder or the image.
+    intrinsics : array_like of 4 numbers, optional
+        [fx, fy, cx, cy] of the frames, instead of those a ``.npz`` holds.
+    depth_scale : float
+        Metres per integer unit, in [MIN_DEPTH_SCALE, MAX_DEPTH_SCALE] (the readers'
+        ``scale``; the CLI's ``--depth-scale`` counts units per metre instead).
+    camera : Camera or callable, optional
+        The camera, instead of ``intrinsics``: a :class:`Camera` of the frames' size,
+        or a function of the frames' shape (H, W) returning one (called once, with the
+        GIL held).
+    pattern : str, optional
+        For a folder, a glob of the frame files to read, relative to it (``*``, ``?``,
+        ``[...]``, ``**`` as :meth:`pathlib.Path.glob` reads them); default: every
+        file with a depth-image suffix. A matched file that is not a depth image is a
+        failed frame, not a failed sequence.
+
+    Returns
+    -------
+    Sequence
+        The sequence, its frames unread.
+
+    Raises
+    ------
+    InvalidTypeError
+        ``path`` not a path, ``pattern`` not a string, ``camera`` neither a
+        :class:`Camera` nor a function, or the function's result not a Camera.
+    InvalidInputError
+        ``depth_scale`` out of range; both ``camera`` and ``intrinsics``; a camera of
+        another size than the frames; intrinsics not four finite numbers; no
+        intrinsics given for a sequence that holds none.
+    MissingFileError
+        ``path`` does not exist.
+    FileFormatError
+        A ``.npz`` that is not a readable archive, without ``depth``, with ``depth``
+        not (T, H, W) of at least one frame, of uint16 or float, with ``fps`` not one
+        positive number; a folder without depth frames (besides ``background.png``),
+        none of whose frames can be read, or whose files ``pattern`` does not match;
+        an image that cannot be read.
+    ResourceLimitError
+        Frames of more than ``MAX_IMAGE_PIXELS`` pixels.
+    """
+
 # ---- exports ------------------------------------------------------------------------
 BVH_PARENTS: dict[str, str | None]
 """Parent of each body segment (part names of the body model); None for the root."""
@@ -582,7 +801,7 @@ def write_bvh(
         ``model`` is not a :class:`BodyModel`; an object or string array.
     """
 
-def write_jsonl(path: str | PathLike[str], results: Sequence[Any]) -> None:
+def write_jsonl(path: str | PathLike[str], results: _Sequence[Any]) -> None:
     """Writes one JSON line per frame, ``{"frame": k, ...}`` with the fields of the
     frame's ``PoseResult.to_dict()``, or ``{"frame": k, "joints": null}`` for a failed
     frame (None).
@@ -859,7 +1078,7 @@ class TemplateDatabase:
         self,
         depth: npt.NDArray[np.generic],
         camera: Camera,
-        indices: Sequence[int] | npt.NDArray[np.integer],
+        indices: _Sequence[int] | npt.NDArray[np.integer],
         mask: npt.NDArray[np.generic] | None = None,
         *,
         location_weight: float = 0.1,
@@ -1031,11 +1250,11 @@ class BodyModel:
     def with_shape_factors(self, factors: npt.ArrayLike) -> BodyModel: ...
     def fit_shape(
         self,
-        depths: npt.NDArray[np.generic] | Sequence[npt.NDArray[np.generic]],
+        depths: npt.NDArray[np.generic] | _Sequence[npt.NDArray[np.generic]],
         camera: Camera,
-        poses: npt.NDArray[np.float64] | Sequence[npt.NDArray[np.float64]],
+        poses: npt.NDArray[np.float64] | _Sequence[npt.NDArray[np.float64]],
         *,
-        masks: npt.NDArray[np.bool_] | Sequence[npt.NDArray[np.bool_]] | None = None,
+        masks: npt.NDArray[np.bool_] | _Sequence[npt.NDArray[np.bool_]] | None = None,
         iterations: int = 3,
         config: FitConfig | Mapping[str, Any] | None = None,
         lm_iterations: int = 20,
@@ -1235,7 +1454,7 @@ def fit_poses(
     config: FitConfig | Mapping[str, Any] | None = None,
     prior: npt.ArrayLike | None = None,
     prior_weight: float = 100.0,
-    resume: Sequence[FitResult] | None = None,
+    resume: _Sequence[FitResult] | None = None,
 ) -> list[FitResult]:
     """:func:`fit_pose` from each of ``init_poses`` on the same image.
 

@@ -21,15 +21,20 @@ from typing import Union
 import numpy as np
 import numpy.typing as npt
 
-from ._core import Camera, DepthPoseError, FileFormatError, InvalidInputError, InvalidTypeError
+from ._core import (
+    Camera,
+    DepthPoseError,
+    FileFormatError,
+    InvalidInputError,
+    InvalidTypeError,
+    _sequence_camera,
+    _stereo_pairs,
+)
 from .io import missing_file, read_image, read_npz
-from .sequence import _camera
 
 PathLike = Union[str, "os.PathLike[str]"]
 
 __all__ = ["StereoSequence", "open_stereo"]
-
-IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg", ".bmp", ".pgm", ".ppm")
 
 _Pair = tuple[np.ndarray, np.ndarray]
 
@@ -86,34 +91,6 @@ def _frames(a: np.ndarray) -> np.ndarray:
     return a[None] if a.ndim == 2 else a
 
 
-def _images(folder: Path) -> list[Path]:
-    return sorted(f for f in folder.iterdir() if f.suffix.lower() in IMAGE_SUFFIXES)
-
-
-def _folder_pairs(p: Path) -> tuple[list[tuple[Path, Path]], tuple[Path, Path] | None]:
-    """The pairs of a folder and its empty-scene pair, if any."""
-    if (p / "left").is_dir() and (p / "right").is_dir():
-        lefts = [f for f in _images(p / "left") if f.stem != "background"]
-        pairs = [(f, p / "right" / f.name) for f in lefts]
-        bg = (p / "left" / "background.png", p / "right" / "background.png")
-    else:
-        lefts = [f for f in _images(p) if "left" in f.stem.lower() and f.stem != "left_bg"]
-        pairs = []
-        for f in lefts:
-            at = f.name.lower().rindex("left")
-            pairs.append((f, f.with_name(f.name[:at] + "right" + f.name[at + 4 :])))
-        bg = (p / "left_bg.png", p / "right_bg.png")
-    if not pairs:
-        raise FileFormatError(
-            f"{p}: no stereo pairs inside (subfolders left/ and right/, or images named "
-            "*left* beside *right*)"
-        )
-    for _, r in pairs:
-        if not r.exists():
-            raise FileFormatError(f"{p}: {r.name}, the right image of a pair, is missing")
-    return pairs, (bg if bg[0].exists() and bg[1].exists() else None)
-
-
 def _number(value: object, name: str, where: Path) -> float:
     try:
         x = float(np.asarray(value, dtype=np.float64).reshape(()))
@@ -157,7 +134,7 @@ def open_stereo(
         kind, n, name = "images", 1, p.stem
         shape = read_image(p).shape[:2]
     elif p.is_dir():
-        files, bg_files = _folder_pairs(p)
+        files, bg_files = _stereo_pairs(p)
         kind, n, name = "folder", len(files), p.name
         shape = read_image(files[0][0]).shape[:2]
         if bg_files is not None and background is None:
@@ -197,7 +174,7 @@ def open_stereo(
     if not (np.isfinite(baseline) and baseline > 0):
         raise InvalidInputError(f"baseline: must be finite and > 0 metres, got {baseline}")
     hw = (int(shape[0]), int(shape[1]))
-    cam = _camera(intrinsics, hw, p, camera)
+    cam = _sequence_camera(hw, p, camera=camera, intrinsics=intrinsics)
     return StereoSequence(
         p, name, kind, n, cam, float(baseline), float(doffs or 0.0), bg, gt, files
     )

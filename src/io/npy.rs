@@ -198,6 +198,94 @@ impl Array {
     }
 }
 
+impl Array {
+    /// Number of elements (the product of the shape).
+    pub fn len(&self) -> usize {
+        self.shape.iter().product()
+    }
+
+    /// Whether the array holds no element.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The element at `k` in C order (the last axis fastest) as 8 little-endian bytes,
+    /// zero-extended; `None` past the end of the data.
+    fn element(&self, k: usize) -> Option<[u8; 8]> {
+        let d = self.dtype;
+        let mut at = k;
+        if self.fortran && self.shape.len() > 1 {
+            // The Fortran-order offset of the C-order index `k`.
+            let (mut rest, mut stride) = (k, 1);
+            at = 0;
+            let mut strides = vec![0; self.shape.len()];
+            for (s, n) in strides.iter_mut().zip(&self.shape) {
+                *s = stride;
+                stride *= n;
+            }
+            for (s, &n) in strides.iter().zip(&self.shape).rev() {
+                at += (rest % n.max(1)) * s;
+                rest /= n.max(1);
+            }
+        }
+        let bytes = self.data.get(at * d.size..(at + 1) * d.size)?;
+        let mut le = [0u8; 8];
+        le.get_mut(..d.size)?.copy_from_slice(bytes);
+        if d.big_endian {
+            le[..d.size].reverse();
+        }
+        Some(le)
+    }
+
+    /// The elements in C order as `f64` (booleans and integers as numbers); `None`
+    /// for text, complex numbers or data shorter than the shape needs.
+    pub fn to_f64(&self) -> Option<Vec<f64>> {
+        let d = self.dtype;
+        if !matches!(d.kind, Kind::Bool | Kind::Int | Kind::Uint | Kind::Float) || d.size > 8 {
+            return None;
+        }
+        (0..self.len())
+            .map(|k| {
+                let le = self.element(k)?;
+                Some(match (d.kind, d.size) {
+                    (Kind::Float, 2) => f64::from(f16_to_f32(u16::from_le_bytes([le[0], le[1]]))),
+                    (Kind::Float, 4) => f64::from(f32::from_le_bytes([le[0], le[1], le[2], le[3]])),
+                    (Kind::Float, _) => f64::from_le_bytes(le),
+                    (Kind::Int, n) => {
+                        // Sign-extends an n-byte integer.
+                        let shift = 64 - 8 * n as u32;
+                        ((i64::from_le_bytes(le) << shift) >> shift) as f64
+                    }
+                    _ => u64::from_le_bytes(le) as f64,
+                })
+            })
+            .collect()
+    }
+
+    /// Depth as `f32` metres, the C-order elements `range`: uint16 units of `scale`
+    /// metres, or float metres; `None` for another dtype or data shorter than the
+    /// shape needs.
+    pub fn depth_values(&self, scale: f64, range: std::ops::Range<usize>) -> Option<Vec<f32>> {
+        let d = self.dtype;
+        let uint16 = d.kind == Kind::Uint && d.size == 2;
+        if !(uint16 || d.kind == Kind::Float) || range.end > self.len() {
+            return None;
+        }
+        let scale = scale as f32;
+        range
+            .map(|k| {
+                let le = self.element(k)?;
+                Some(match d.size {
+                    _ if uint16 => f32::from(u16::from_le_bytes([le[0], le[1]])) * scale,
+                    2 => f16_to_f32(u16::from_le_bytes([le[0], le[1]])),
+                    4 => f32::from_le_bytes([le[0], le[1], le[2], le[3]]),
+                    _ => f64::from_le_bytes(le) as f32,
+                })
+            })
+            .collect()
+    }
+}
+
 /// The shape as Python prints a tuple: `(6, 8)`, `(3,)`, `()`.
 pub fn shape_text(shape: &[usize]) -> String {
     match shape {

@@ -13,9 +13,45 @@ use crate::error::{Error, Result};
 use std::io::{BufReader, BufWriter, Read};
 use std::path::Path;
 
+/// An entry of an archive: its key, its `.npy` header and, when asked for, its data.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    pub key: String,
+    pub header: npy::Header,
+    pub data: Option<Vec<u8>>,
+}
+
 /// Reads the arrays of the archive at `path`, in the archive's order: all of them, or
 /// those whose key is in `keys`. `what` names what the file should be in errors.
 pub fn read(path: &Path, what: &str, keys: Option<&[String]>) -> Result<Vec<(String, npy::Array)>> {
+    let wanted = |key: &str| keys.is_none_or(|keys| keys.iter().any(|k| k == key));
+    let entries = read_entries(path, what, &wanted)?;
+    Ok(entries
+        .into_iter()
+        .filter_map(|Entry { key, header, data }| {
+            let npy::Header {
+                dtype,
+                shape,
+                fortran,
+                ..
+            } = header;
+            Some((
+                key,
+                npy::Array {
+                    dtype,
+                    shape,
+                    fortran,
+                    data: data?,
+                },
+            ))
+        })
+        .collect())
+}
+
+/// Every entry of the archive at `path` with its header, each checked as [`read`]
+/// checks it; the data of those for whose key `wanted` is true (the others' data is
+/// not read, so a caller learns an array's shape and dtype without its bytes).
+pub fn read_entries(path: &Path, what: &str, wanted: &dyn Fn(&str) -> bool) -> Result<Vec<Entry>> {
     existing(path, what)?;
     let not = |why: String| Error::file(path_str(path), format!("not {what} ({why})"));
     let file = std::fs::File::open(path).map_err(|e| io_error(path, "read", e))?;
@@ -42,31 +78,19 @@ pub fn read(path: &Path, what: &str, keys: Option<&[String]>) -> Result<Vec<(Str
                 header.data_bytes
             )));
         }
-        if keys.is_some_and(|keys| !keys.contains(&key)) {
-            continue;
-        }
-        let data = npy::read_data(&mut entry, &header)
-            .map_err(|m| entry_err(&format!("is unreadable: {m}")))?;
-        // Reading on to the end checks the entry's checksum.
-        let mut rest = Vec::new();
-        entry
-            .read_to_end(&mut rest)
-            .map_err(|e| entry_err(&format!("is corrupt: {e}")))?;
-        let npy::Header {
-            dtype,
-            shape,
-            fortran,
-            ..
-        } = header;
-        out.push((
-            key,
-            npy::Array {
-                dtype,
-                shape,
-                fortran,
-                data,
-            },
-        ));
+        let data = if wanted(&key) {
+            let data = npy::read_data(&mut entry, &header)
+                .map_err(|m| entry_err(&format!("is unreadable: {m}")))?;
+            // Reading on to the end checks the entry's checksum.
+            let mut rest = Vec::new();
+            entry
+                .read_to_end(&mut rest)
+                .map_err(|e| entry_err(&format!("is corrupt: {e}")))?;
+            Some(data)
+        } else {
+            None
+        };
+        out.push(Entry { key, header, data });
     }
     Ok(out)
 }

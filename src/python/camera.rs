@@ -37,6 +37,21 @@ pub struct PyCamera {
     pub inner: Camera,
 }
 
+impl PyCamera {
+    /// A camera from [fx, fy, cx, cy] and the image shape (height, width), checked as
+    /// `Camera.from_intrinsics` checks it.
+    pub(crate) fn from_values(k: [f64; 4], (height, width): (usize, usize)) -> PyResult<Self> {
+        Self::new(
+            Real::new(k[0]),
+            Real::new(k[1]),
+            Real::new(k[2]),
+            Real::new(k[3]),
+            Int::new(width as i128),
+            Int::new(height as i128),
+        )
+    }
+}
+
 #[pymethods]
 impl PyCamera {
     #[new]

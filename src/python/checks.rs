@@ -26,15 +26,24 @@ fn _check_integer<'py>(
     low: Option<i128>,
     high: Option<i128>,
 ) -> PyResult<Bound<'py, PyAny>> {
-    let name = name_of(&name);
+    integer(value, &name_of(&name), low, high)
+}
+
+/// [`_check_integer`] for Rust callers: `value` within [`low`, `high`] as a Python int.
+pub(crate) fn integer<'py>(
+    value: &Bound<'py, PyAny>,
+    name: &str,
+    low: Option<i128>,
+    high: Option<i128>,
+) -> PyResult<Bound<'py, PyAny>> {
     let range = || {
         let end = |b: Option<i128>| b.map(|v| v.to_string()).unwrap_or_default();
         format!("must be an integer in {}..{}", end(low), end(high))
     };
     let int: Int = value.extract()?;
-    match int.get(&name) {
+    match int.get(name) {
         Ok(v) if low.is_some_and(|l| v < l) || high.is_some_and(|h| v > h) => {
-            Err(invalid(&name, format!("{}, got {v}", range())))
+            Err(invalid(name, format!("{}, got {v}", range())))
         }
         Ok(_) => value.call_method0("__index__"),
         Err(e) if e.is_instance_of::<InvalidTypeError>(value.py()) => Err(e),
@@ -46,7 +55,7 @@ fn _check_integer<'py>(
                 Ok(v)
             } else {
                 Err(invalid(
-                    &name,
+                    name,
                     format!("{}, got an integer far outside it", range()),
                 ))
             }
@@ -65,8 +74,17 @@ fn _check_number(
     high: Option<f64>,
     low_open: bool,
 ) -> PyResult<f64> {
-    let name = name_of(&name);
-    let v = value.get(&name)?;
+    number(value, &name_of(&name), (low, high), low_open)
+}
+
+/// [`_check_number`] for Rust callers: `value` within `(low, high)` (`None`: open).
+pub(crate) fn number(
+    value: Real,
+    name: &str,
+    (low, high): (Option<f64>, Option<f64>),
+    low_open: bool,
+) -> PyResult<f64> {
+    let v = value.get(name)?;
     let (lo, hi) = (
         low.unwrap_or(f64::NEG_INFINITY),
         high.unwrap_or(f64::INFINITY),
@@ -76,7 +94,7 @@ fn _check_number(
         return Ok(v);
     }
     Err(invalid(
-        &name,
+        name,
         format!(
             "must be a finite number in {}{}, {}], got {}",
             if low_open { "(" } else { "[" },

@@ -19,6 +19,7 @@ mod io;
 mod keywords;
 mod pipeline;
 mod segment;
+mod sequence;
 mod stereo;
 mod stereo_pose;
 mod synth;
@@ -200,6 +201,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     graphcut::register(m)?;
     io::register(m)?;
     segment::register(m)?;
+    sequence::register(m)?;
     pipeline::register(m)?;
     stereo::register(m)?;
     stereo_pose::register(m)?;
