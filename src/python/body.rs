@@ -1,23 +1,26 @@
-//! `BodyModel` for Python: kinematics, distances, Jacobians, rendering, meshes.
+//! `BodyModel` for Python: kinematics, distances, Jacobians, rendering, meshes, and
+//! `ShapeFitResult`, the outcome of its shape fit.
 
 use super::convert::{
     bool_array, camera as camera_arg, check_fit_points, check_image_pixels, check_result_bytes,
-    depth_array, f32_array, f64_array, fit_config, i64_array, invalid, to_numpy, Int, Real,
+    depth_array, f32_array, f64_array, fit_config, i64_array, invalid, joints_to_numpy, to_numpy,
+    Int, Real,
 };
-use super::fit::PyShapeFitResult;
 use super::keywords::keywords;
 use super::{native, native_ok};
 use crate::body::rotation;
 use crate::body::superquadric::MeshConfig;
 use crate::body::{
     pose_from_slice, pose_with_root_increment, BodyModel, BodyShape, Pose, JOINT_NAMES, NUM_JOINTS,
-    NUM_PARAMS, NUM_SEGMENTS, PARAM_NAMES, PART_NAMES, SHAPE_FACTOR_NAMES, SHAPE_PARAM_NAMES,
+    NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS, PARAM_NAMES, PART_NAMES, SHAPE_FACTOR_NAMES,
+    SHAPE_PARAM_NAMES,
 };
 use crate::error::Error;
 use crate::fit::{self, ShapeConfig, ShapeFrame};
 use numpy::{PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
+use std::collections::HashMap;
 
 type F64Array<'py> = Bound<'py, PyArrayDyn<f64>>;
 type F32Array<'py> = Bound<'py, PyArrayDyn<f32>>;
@@ -625,7 +628,97 @@ fn _euler_zxy(matrix: &Bound<'_, PyAny>) -> PyResult<(f64, f64, f64)> {
     Ok((z.to_degrees(), x.to_degrees(), y.to_degrees()))
 }
 
+/// Outcome of `BodyModel.fit_shape`: the calibrated model, its shape factors and the
+/// fitted poses of the calibration frames.
+#[pyclass(name = "ShapeFitResult", module = "depthpose._core")]
+pub struct PyShapeFitResult {
+    pub(crate) result: fit::ShapeResult,
+    pub(crate) height: usize,
+    pub(crate) width: usize,
+}
+
+#[pymethods]
+impl PyShapeFitResult {
+    /// The base model with the fitted shape.
+    #[getter]
+    fn model(&self) -> PyBodyModel {
+        PyBodyModel {
+            inner: self.result.model.clone(),
+        }
+    }
+    /// The shape factors (12,) relative to the base model, `factor_names` order.
+    #[getter]
+    fn factors<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
+        to_numpy(py, self.result.factors.to_vec(), &[NUM_SHAPE_FACTORS])
+    }
+    /// Names of the shape factors.
+    #[getter]
+    fn factor_names(&self) -> Vec<&'static str> {
+        SHAPE_FACTOR_NAMES.to_vec()
+    }
+    /// The factors as a {name: value} dict.
+    fn factors_dict(&self) -> HashMap<&'static str, f64> {
+        SHAPE_FACTOR_NAMES
+            .iter()
+            .copied()
+            .zip(self.result.factors)
+            .collect()
+    }
+    /// The fitted pose of every frame (F, 22).
+    #[getter]
+    fn poses<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
+        let n = self.result.poses.len();
+        let v = self.result.poses.iter().flatten().copied().collect();
+        to_numpy(py, v, &[n, NUM_PARAMS])
+    }
+    /// The joints of every frame (F, 15, 3) with the fitted model, camera frame.
+    #[getter]
+    fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
+        let n = self.result.joints.len();
+        joints_to_numpy(py, self.result.joints.iter().flatten(), &[n, NUM_JOINTS, 3])
+    }
+    /// Part labels of every frame (F, H, W) int16: segment 0..15, −1 = background or
+    /// outlier.
+    #[getter]
+    fn labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<i16>>> {
+        let n = self.result.labels.len();
+        let v = self.result.labels.iter().flatten().copied().collect();
+        to_numpy(py, v, &[n, self.height, self.width])
+    }
+    /// The final energy (sum over the frames plus the shape prior).
+    #[getter]
+    fn energy(&self) -> f64 {
+        self.result.energy
+    }
+    /// The energy after every pose/label step and every shape step (non-increasing).
+    #[getter]
+    fn energy_trace<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
+        let n = self.result.energy_trace.len();
+        to_numpy(py, self.result.energy_trace.clone(), &[n])
+    }
+    /// Rounds of pose/label step + shape step run.
+    #[getter]
+    fn rounds(&self) -> usize {
+        self.result.rounds
+    }
+    fn __repr__(&self) -> String {
+        let f: Vec<String> = SHAPE_FACTOR_NAMES
+            .iter()
+            .zip(self.result.factors)
+            .map(|(n, v)| format!("{n}={v:.3}"))
+            .collect();
+        format!(
+            "ShapeFitResult(frames={}, energy={:.4}, rounds={}, {})",
+            self.result.poses.len(),
+            self.result.energy,
+            self.result.rounds,
+            f.join(", ")
+        )
+    }
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyBodyModel>()?;
+    m.add_class::<PyShapeFitResult>()?;
     m.add_function(wrap_pyfunction!(_euler_zxy, m)?)
 }

@@ -1,6 +1,6 @@
 //! Model fitting for Python: `FitConfig`, `FitResult`, `fit_pose`, `pose_from_joints`.
 
-use super::body::{pose_arg, poses_arg, PyBodyModel};
+use super::body::{pose_arg, poses_arg};
 use super::convert::{
     array_like, body_model, bool_array, camera as camera_arg, check_fit_points, depth_array,
     f64_array, fit_config, invalid, joints_to_numpy, object, to_numpy, wrong_type, Flag, Int, Real,
@@ -8,10 +8,7 @@ use super::convert::{
 };
 use super::keywords::keywords;
 use super::native;
-use crate::body::{
-    BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, NUM_SHAPE_FACTORS, PART_NAMES,
-    SHAPE_FACTOR_NAMES,
-};
+use crate::body::{BodyModel, NUM_JOINTS, NUM_PARAMS, NUM_SEGMENTS, PART_NAMES};
 use crate::camera::Camera;
 use crate::cloud::Connectivity;
 use crate::error::{brief, Error};
@@ -464,95 +461,6 @@ impl PyFitResult {
     }
 }
 
-/// Outcome of `BodyModel.fit_shape`: the calibrated model, its shape factors and the
-/// fitted poses of the calibration frames.
-#[pyclass(name = "ShapeFitResult", module = "depthpose._core")]
-pub struct PyShapeFitResult {
-    pub(crate) result: fit::ShapeResult,
-    pub(crate) height: usize,
-    pub(crate) width: usize,
-}
-
-#[pymethods]
-impl PyShapeFitResult {
-    /// The base model with the fitted shape.
-    #[getter]
-    fn model(&self) -> PyBodyModel {
-        PyBodyModel {
-            inner: self.result.model.clone(),
-        }
-    }
-    /// The shape factors (12,) relative to the base model, `factor_names` order.
-    #[getter]
-    fn factors<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
-        to_numpy(py, self.result.factors.to_vec(), &[NUM_SHAPE_FACTORS])
-    }
-    /// Names of the shape factors.
-    #[getter]
-    fn factor_names(&self) -> Vec<&'static str> {
-        SHAPE_FACTOR_NAMES.to_vec()
-    }
-    /// The factors as a {name: value} dict.
-    fn factors_dict(&self) -> HashMap<&'static str, f64> {
-        SHAPE_FACTOR_NAMES
-            .iter()
-            .copied()
-            .zip(self.result.factors)
-            .collect()
-    }
-    /// The fitted pose of every frame (F, 22).
-    #[getter]
-    fn poses<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
-        let n = self.result.poses.len();
-        let v = self.result.poses.iter().flatten().copied().collect();
-        to_numpy(py, v, &[n, NUM_PARAMS])
-    }
-    /// The joints of every frame (F, 15, 3) with the fitted model, camera frame.
-    #[getter]
-    fn joints<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
-        let n = self.result.joints.len();
-        joints_to_numpy(py, self.result.joints.iter().flatten(), &[n, NUM_JOINTS, 3])
-    }
-    /// Part labels of every frame (F, H, W) int16: segment 0..15, −1 = background or
-    /// outlier.
-    #[getter]
-    fn labels<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyArrayDyn<i16>>> {
-        let n = self.result.labels.len();
-        let v = self.result.labels.iter().flatten().copied().collect();
-        to_numpy(py, v, &[n, self.height, self.width])
-    }
-    /// The final energy (sum over the frames plus the shape prior).
-    #[getter]
-    fn energy(&self) -> f64 {
-        self.result.energy
-    }
-    /// The energy after every pose/label step and every shape step (non-increasing).
-    #[getter]
-    fn energy_trace<'py>(&self, py: Python<'py>) -> PyResult<F64Array<'py>> {
-        let n = self.result.energy_trace.len();
-        to_numpy(py, self.result.energy_trace.clone(), &[n])
-    }
-    /// Rounds of pose/label step + shape step run.
-    #[getter]
-    fn rounds(&self) -> usize {
-        self.result.rounds
-    }
-    fn __repr__(&self) -> String {
-        let f: Vec<String> = SHAPE_FACTOR_NAMES
-            .iter()
-            .zip(self.result.factors)
-            .map(|(n, v)| format!("{n}={v:.3}"))
-            .collect();
-        format!(
-            "ShapeFitResult(frames={}, energy={:.4}, rounds={}, {})",
-            self.result.poses.len(),
-            self.result.energy,
-            self.result.rounds,
-            f.join(", ")
-        )
-    }
-}
-
 /// The arguments `fit_pose`, `fit_poses` and `label_all_pixels` share, checked.
 struct FitArgs {
     depth: Vec<f32>,
@@ -837,7 +745,6 @@ const MAX_COORDINATE: f64 = 1e6;
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyFitConfig>()?;
     m.add_class::<PyFitResult>()?;
-    m.add_class::<PyShapeFitResult>()?;
     m.add_function(wrap_pyfunction!(fit_pose, m)?)?;
     m.add_function(wrap_pyfunction!(fit_poses, m)?)?;
     m.add_function(wrap_pyfunction!(label_all_pixels, m)?)?;

@@ -1,10 +1,10 @@
 //! `PoseTracker`: the pose through a depth video, one native call per frame with the
 //! GIL released.
 
+use super::super::body::PyShapeFitResult;
 use super::super::body::{pose_arg, PyBodyModel};
 use super::super::camera::PyCamera;
 use super::super::convert::{to_numpy, Flag};
-use super::super::fit::PyShapeFitResult;
 use super::super::native;
 use super::args::{calibrate_arg, estimator_of, EstimatorArgs, FrameArgs};
 use super::config::PyPipelineConfig;
