@@ -6,10 +6,10 @@
 //! EM astray. The neutral body (upright, arms down) facing each quarter turn and rolled
 //! by every eighth of a turn ([`rolled_neutral_bodies`]) is a start within 22.5° of any
 //! trunk's roll and 45° of its turn about its own axis, and the EM bends the limbs onto
-//! the body. A neutral
-//! start is far from the body's limbs, so it needs a longer EM than a template start:
-//! every start gets a short EM at twice the final stride, and the `finals` that explain
-//! the depth best a full EM, as the template search continues its best candidates.
+//! the body. A neutral start is far from the body's limbs, so it needs a longer EM than
+//! a template start: every start gets a short EM at twice the final stride, and the
+//! `finals` that explain the depth best a full EM, as the template search continues its
+//! best candidates.
 
 use super::estimator::{stable_order, Estimator, Frame};
 use super::hypotheses::rolled_neutral_bodies;
