@@ -21,6 +21,24 @@ pub struct Entry {
     pub data: Option<Vec<u8>>,
 }
 
+impl Entry {
+    /// The entry as an array, when its data was read.
+    pub fn into_array(self) -> Option<npy::Array> {
+        let npy::Header {
+            dtype,
+            shape,
+            fortran,
+            ..
+        } = self.header;
+        Some(npy::Array {
+            dtype,
+            shape,
+            fortran,
+            data: self.data?,
+        })
+    }
+}
+
 /// Reads the arrays of the archive at `path`, in the archive's order: all of them, or
 /// those whose key is in `keys`. `what` names what the file should be in errors.
 pub fn read(path: &Path, what: &str, keys: Option<&[String]>) -> Result<Vec<(String, npy::Array)>> {
@@ -28,23 +46,7 @@ pub fn read(path: &Path, what: &str, keys: Option<&[String]>) -> Result<Vec<(Str
     let entries = read_entries(path, what, &wanted)?;
     Ok(entries
         .into_iter()
-        .filter_map(|Entry { key, header, data }| {
-            let npy::Header {
-                dtype,
-                shape,
-                fortran,
-                ..
-            } = header;
-            Some((
-                key,
-                npy::Array {
-                    dtype,
-                    shape,
-                    fortran,
-                    data: data?,
-                },
-            ))
-        })
+        .filter_map(|e| Some((e.key.clone(), e.into_array()?)))
         .collect())
 }
 

@@ -8,7 +8,7 @@
 
 use super::{stem, Kind, Sequence, Values};
 use crate::error::{brief, Error, Result};
-use crate::io::npy::{self, Array, Kind as DtypeKind};
+use crate::io::npy::{self, Kind as DtypeKind};
 use crate::io::{check_size, npz, path_str};
 use std::path::Path;
 
@@ -53,14 +53,10 @@ pub fn open(path: &Path, depth_scale: f64) -> Result<Sequence> {
         )));
     };
     let array = |key: &str| {
-        entries.iter().find(|e| e.key == key).and_then(|e| {
-            Some(Array {
-                dtype: e.header.dtype,
-                shape: e.header.shape.clone(),
-                fortran: e.header.fortran,
-                data: e.data.clone()?,
-            })
-        })
+        entries
+            .iter()
+            .find(|e| e.key == key)
+            .and_then(|e| e.clone().into_array())
     };
     let gt_joints = match array("joints") {
         None => None,
@@ -166,7 +162,7 @@ pub fn frames(seq: &Sequence, start: usize, stop: usize) -> Result<Values<f32>> 
 mod tests {
     use super::super::{open as open_any, Options};
     use super::*;
-    use crate::io::npy::Dtype;
+    use crate::io::npy::{Array, Dtype};
     use crate::io::tests::temp_dir;
 
     fn depth_u16(t: usize, h: usize, w: usize) -> Array {
