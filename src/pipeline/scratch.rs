@@ -10,8 +10,10 @@
 //! replaces the first when it ranks better by `switch_margin`. When the wide search's
 //! fit explains the depth badly too, the body may be one no template resembles
 //! (airborne, tucked, split): the neutral bodies at every orientation
-//! ([`super::neutral`]) are fitted as well and the better-ranked reading competes. Frames
-//! explained well pay nothing for either.
+//! ([`super::neutral`]) are fitted as well and the better-ranked reading competes. When
+//! the result still explains the depth badly, the first search runs again with the body
+//! at the end of the size range toward which the result's size leans
+//! (`Estimator::search_size_ends`), for a subject whose size misled it. Frames explained well pay for none of these.
 
 use super::estimator::{Estimator, Frame};
 use super::result::Clock;
@@ -21,7 +23,8 @@ use crate::error::Result;
 impl Estimator {
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
     /// labelled at every pixel. Laps `clock` at "templates", "fit" and, when the wide
-    /// search runs, "wide" (and "neutral" for the neutral bodies' fits).
+    /// search runs, "wide" (and "neutral" for the neutral bodies' fits), and "sizes" when
+    /// the searches at the ends of the size range run.
     pub(crate) fn fit_from_scratch(
         &self,
         frame: &mut Frame,
@@ -62,6 +65,23 @@ impl Estimator {
                 }
                 clock.lap("wide");
             }
+        }
+        if size && self.explains_badly(frame, sized.score) {
+            // Still explained badly: the subject's size may be far enough from the
+            // model's that the search, at the model's size, preferred a wrong reading.
+            // The ends of the size range are less likely too: `switch_margin` again.
+            let keep = 1.0 - self.config().switch_margin;
+            if let Some(other) = self
+                .search_size_ends(frame, hypotheses, sized.scale)?
+                .into_iter()
+                .next()
+            {
+                let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
+                if rank(&other) < rank(&sized) * keep {
+                    sized = other;
+                }
+            }
+            clock.lap("sizes");
         }
         Ok(sized)
     }

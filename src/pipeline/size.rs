@@ -9,6 +9,11 @@
 //! plus the rest-pose penalty, the measure by which poses compete everywhere in the
 //! pipeline. A smaller body leaves observed pixels unexplained, a larger one covers
 //! pixels off the person, so the discrepancy has its minimum near the subject's size.
+//!
+//! Only the search's best reading is sized, and the search compares its readings at the
+//! model's size, where a subject far from it can be explained better by a wrong reading
+//! than by the right one. A result that still explains the depth badly is searched again
+//! with the body at an end of the size range (`Estimator::search_size_ends`).
 
 use super::estimator::{Estimator, Frame};
 use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
@@ -41,12 +46,6 @@ impl Estimator {
     /// `fit` (the search's best, made with the estimator's model, `score` its
     /// discrepancy) with the body's size found when `search` (see the module docs),
     /// labelled at every pixel with the body kept.
-    ///
-    /// The sizes are walked outward from 1 in rounds of two fits run in parallel: the
-    /// nearest two first, then, while the best size is the outermost tried, the next two
-    /// on its side. The discrepancy is smooth in the size and has one minimum near the
-    /// subject's, so the walk finds the grid's best in two rounds where trying every
-    /// size would take three or more.
     pub(crate) fn fit_size(
         &self,
         frame: &mut Frame,
@@ -54,52 +53,121 @@ impl Estimator {
         score: f64,
         search: bool,
     ) -> Result<SizedFit> {
+        let steps = if search { self.size_steps() } else { 0 };
+        self.walk_sizes(frame, fit, score, 0, steps)
+    }
+
+    /// The sizes 1 + k·`size_step` the size search may try have |k| up to this.
+    fn size_steps(&self) -> i64 {
         let cfg = self.config();
-        let steps = if search {
-            size_steps(cfg.size_range, cfg.size_step)
-        } else {
-            0
-        };
+        size_steps(cfg.size_range, cfg.size_step) as i64
+    }
+
+    /// The estimator's model scaled by 1 + `k`·`size_step`.
+    fn model_at_size(&self, k: i64) -> Result<BodyModel> {
+        let scale = 1.0 + k as f64 * self.config().size_step;
+        self.model().with_shape_factors(&[scale; NUM_SHAPE_FACTORS])
+    }
+
+    /// `fit` (made with the body at size step `from`, `score` its discrepancy) refitted
+    /// at the sizes 1 + k·`size_step`, |k| ≤ `steps`, walking outward from `from`, the
+    /// best kept and labelled at every pixel.
+    ///
+    /// The walk goes in rounds of two fits run in parallel: the two sizes beside `from`
+    /// first, then, while the best size is the outermost tried on its side, the next
+    /// two on that side. The discrepancy is smooth in the size and has one minimum near
+    /// the subject's, so the walk finds the grid's best in two rounds where trying every
+    /// size would take three or more.
+    fn walk_sizes(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        score: f64,
+        from: i64,
+        steps: i64,
+    ) -> Result<SizedFit> {
+        let step = self.config().size_step;
         let mut best = SizedFit {
             fit,
             score,
-            scale: 1.0,
-            model: self.model().clone(),
+            scale: 1.0 + from as f64 * step,
+            model: self.model_at_size(from)?,
         };
         if steps > 0 {
             let mut rank = self.rank(best.score, &best.fit.pose);
             // One short EM from the fitted pose per size: it is on the body already.
-            let config = cfg.short_refit();
+            let config = self.config().short_refit();
             let start = best.fit.pose;
-            let step = cfg.size_step;
-            let mut round = vec![1.0 - step, 1.0 + step];
-            let mut reached = 1;
+            let within = |k: &i64| k.abs() <= steps;
+            let mut round: Vec<i64> = [from - 1, from + 1].into_iter().filter(within).collect();
+            let (mut low, mut high) = (from, from);
             while !round.is_empty() {
-                let tried = self.fits_at_sizes(frame, &config, &start, &round)?;
+                let scales: Vec<f64> = round.iter().map(|&k| 1.0 + k as f64 * step).collect();
+                let tried = self.fits_at_sizes(frame, &config, &start, &scales)?;
+                low = low.min(round.iter().copied().min().unwrap_or(from));
+                high = high.max(round.iter().copied().max().unwrap_or(from));
                 let mut moved = None;
-                for t in tried {
+                for (t, &k) in tried.into_iter().zip(&round) {
                     let r = self.rank(t.score, &t.fit.pose);
                     if r < rank {
                         rank = r;
-                        moved = Some(t.scale);
+                        moved = Some(k);
                         best = t;
                     }
                 }
                 // Walk on only while the best is the outermost size tried on its side.
                 let side = match moved {
-                    Some(s) if ((s - 1.0).abs() - reached as f64 * step).abs() < 1e-9 => {
-                        (s - 1.0).signum()
-                    }
+                    Some(k) if k == low && k < from => -1,
+                    Some(k) if k == high && k > from => 1,
                     _ => break,
                 };
-                round = (reached + 1..=(reached + 2).min(steps))
-                    .map(|k| 1.0 + side * k as f64 * step)
+                let edge = if side < 0 { low } else { high };
+                round = [edge + side, edge + 2 * side]
+                    .into_iter()
+                    .filter(within)
                     .collect();
-                reached += round.len();
             }
         }
         best.fit = self.label_all(frame, best.fit, &best.model)?;
         Ok(best)
+    }
+
+    /// The first search ([`Self::search`], then the limb poses and the turns) made with
+    /// the body at an end of the size range, its fit then sized by walking inward from
+    /// there. At the model's size, a subject far enough from it may be explained better
+    /// by a wrong reading (upside down, the limbs crossed) than by the right one, which
+    /// then never reaches the size search. The end is the one on the side of `scale`,
+    /// the size found for the reading the search preferred (which, wrong as it may be,
+    /// was fitted to the same pixels); both ends at the model's size, best-ranked first.
+    pub(crate) fn search_size_ends(
+        &self,
+        frame: &mut Frame,
+        hypotheses: usize,
+        scale: f64,
+    ) -> Result<Vec<SizedFit>> {
+        let steps = self.size_steps();
+        let side = if (scale - 1.0).abs() < 1e-9 {
+            0.0
+        } else {
+            (scale - 1.0).signum()
+        };
+        let mut ends = Vec::new();
+        for end in [-steps, steps] {
+            if end == 0 || (end as f64).signum() * side < 0.0 {
+                continue;
+            }
+            let mut at_end = self.clone();
+            at_end.set_model(self.model_at_size(end)?);
+            let (best, score) = at_end.search(frame, &[], hypotheses, None)?;
+            let (best, score) = at_end.repose_limbs(frame, best, score)?;
+            let (best, score) = at_end.try_turns(frame, best, score)?;
+            ends.push(self.walk_sizes(frame, best, score, end, steps)?);
+        }
+        ends.sort_by(|a, b| {
+            let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
+            rank(a).total_cmp(&rank(b))
+        });
+        Ok(ends)
     }
 
     /// Fits from `start` with the body scaled uniformly to each of `scales`, in
@@ -192,6 +260,68 @@ mod tests {
         tracker.reset(true);
         assert_eq!(tracker.size(), None);
         assert_eq!(tracker.model(), tracker.base_model());
+    }
+
+    /// The mean distance between the joints of a sized fit and of `subject` at `pose`.
+    fn sized_joint_error(sized: &SizedFit, subject: &BodyModel, pose: &Pose) -> f64 {
+        let (a, b) = (sized.model.joints(&sized.fit.pose), subject.joints(pose));
+        a.iter().zip(&b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len() as f64
+    }
+
+    #[test]
+    fn the_size_walk_from_an_end_of_the_range_comes_inward_to_the_subject() {
+        // A 0.95-scale subject, fitted first with the body at the range's small end.
+        let subject = BodyModel::default()
+            .with_shape_factors(&[0.95; NUM_SHAPE_FACTORS])
+            .unwrap();
+        let (camera, depth, pose) = room_with(&subject, 0.6);
+        let est = estimator(&camera, PipelineConfig::default());
+        let sized = crate::pool::on_worker(|| {
+            let mut frame = est.prepare(&depth, None, None)?;
+            let steps = est.size_steps();
+            let small = est.model_at_size(-steps)?;
+            let config = est.config().short_refit();
+            let fit = est
+                .problem(&mut frame, &config)?
+                .fit_from(&small, &pose, None, None)?;
+            let score = est.discrepancy_with(&frame, &small, &fit.pose).0;
+            est.walk_sizes(&mut frame, fit, score, -steps, steps)
+        })
+        .unwrap();
+        assert!((sized.scale - 0.95).abs() < 0.026, "size {}", sized.scale);
+        let error = sized_joint_error(&sized, &subject, &pose);
+        assert!(error < 0.03, "mean joint error {error}");
+    }
+
+    #[test]
+    fn the_searches_at_the_ends_of_the_size_range_find_a_small_subject() {
+        let subject = BodyModel::new(1.50).unwrap();
+        let (camera, depth, pose) = room_with(&subject, 0.6);
+        let est = estimator(&camera, PipelineConfig::default());
+        let ends = crate::pool::on_worker(|| {
+            let mut frame = est.prepare(&depth, None, None)?;
+            let hypotheses = est.config().hypotheses;
+            let small = est.search_size_ends(&mut frame, hypotheses, 0.9)?;
+            let large = est.search_size_ends(&mut frame, hypotheses, 1.1)?;
+            let both = est.search_size_ends(&mut frame, hypotheses, 1.0)?;
+            assert_eq!((small.len(), large.len()), (1, 1));
+            // Each walks inward from its end, as far as the subject's size.
+            assert!(small[0].scale < 0.95 && large[0].scale < 1.15);
+            Ok::<_, crate::error::Error>(both)
+        })
+        .unwrap();
+        // At the model's size: one search per end, best-ranked first: the small end,
+        // sized near 1.50/1.75.
+        assert_eq!(ends.len(), 2);
+        let rank = |s: &SizedFit| est.rank(s.score, &s.fit.pose);
+        assert!(rank(&ends[0]) <= rank(&ends[1]));
+        assert!(
+            (0.8..=0.9).contains(&ends[0].scale),
+            "size {}",
+            ends[0].scale
+        );
+        let error = sized_joint_error(&ends[0], &subject, &pose);
+        assert!(error < 0.05, "mean joint error {error}");
     }
 
     #[test]
