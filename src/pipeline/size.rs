@@ -13,7 +13,8 @@
 //! Only the search's best reading is sized, and the search compares its readings at the
 //! model's size, where a subject far from it can be explained better by a wrong reading
 //! than by the right one. A result that still explains the depth badly is searched again
-//! with the body at an end of the size range (`Estimator::search_size_ends`).
+//! with the body at the end of the size range toward which its size leans
+//! (`Estimator::search_size_end`).
 
 use super::estimator::{Estimator, Frame};
 use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
@@ -133,41 +134,30 @@ impl Estimator {
     }
 
     /// The first search ([`Self::search`], then the limb poses and the turns) made with
-    /// the body at an end of the size range, its fit then sized by walking inward from
-    /// there. At the model's size, a subject far enough from it may be explained better
-    /// by a wrong reading (upside down, the limbs crossed) than by the right one, which
-    /// then never reaches the size search. The end is the one on the side of `scale`,
-    /// the size found for the reading the search preferred (which, wrong as it may be,
-    /// was fitted to the same pixels); both ends at the model's size, best-ranked first.
-    pub(crate) fn search_size_ends(
+    /// the body at the end of the size range toward which `scale` leans, its fit then
+    /// sized by walking inward from there. `scale` is the size found for the reading
+    /// the search preferred: wrong as that reading may be, it was fitted to the same
+    /// pixels. At the model's size a subject far from it may be explained better by a
+    /// wrong reading (upside down, the limbs crossed) than by the right one, which then
+    /// never reaches the size search. None when `scale` is the model's size (nothing
+    /// says the size misled the search) or no size is searched.
+    pub(crate) fn search_size_end(
         &self,
         frame: &mut Frame,
         hypotheses: usize,
         scale: f64,
-    ) -> Result<Vec<SizedFit>> {
+    ) -> Result<Option<SizedFit>> {
         let steps = self.size_steps();
-        let side = if (scale - 1.0).abs() < 1e-9 {
-            0.0
-        } else {
-            (scale - 1.0).signum()
-        };
-        let mut ends = Vec::new();
-        for end in [-steps, steps] {
-            if end == 0 || (end as f64).signum() * side < 0.0 {
-                continue;
-            }
-            let mut at_end = self.clone();
-            at_end.set_model(self.model_at_size(end)?);
-            let (best, score) = at_end.search(frame, &[], hypotheses, None)?;
-            let (best, score) = at_end.repose_limbs(frame, best, score)?;
-            let (best, score) = at_end.try_turns(frame, best, score)?;
-            ends.push(self.walk_sizes(frame, best, score, end, steps)?);
+        if steps == 0 || (scale - 1.0).abs() < 1e-9 {
+            return Ok(None);
         }
-        ends.sort_by(|a, b| {
-            let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
-            rank(a).total_cmp(&rank(b))
-        });
-        Ok(ends)
+        let end = if scale < 1.0 { -steps } else { steps };
+        let mut at_end = self.clone();
+        at_end.set_model(self.model_at_size(end)?);
+        let (best, score) = at_end.search(frame, &[], hypotheses, None)?;
+        let (best, score) = at_end.repose_limbs(frame, best, score)?;
+        let (best, score) = at_end.try_turns(frame, best, score)?;
+        self.walk_sizes(frame, best, score, end, steps).map(Some)
     }
 
     /// Fits from `start` with the body scaled uniformly to each of `scales`, in
@@ -294,34 +284,32 @@ mod tests {
     }
 
     #[test]
-    fn the_searches_at_the_ends_of_the_size_range_find_a_small_subject() {
+    fn the_search_at_the_small_end_of_the_size_range_finds_a_small_subject() {
         let subject = BodyModel::new(1.50).unwrap();
         let (camera, depth, pose) = room_with(&subject, 0.6);
         let est = estimator(&camera, PipelineConfig::default());
-        let ends = crate::pool::on_worker(|| {
+        let (small, large, none) = crate::pool::on_worker(|| {
             let mut frame = est.prepare(&depth, None, None)?;
             let hypotheses = est.config().hypotheses;
-            let small = est.search_size_ends(&mut frame, hypotheses, 0.9)?;
-            let large = est.search_size_ends(&mut frame, hypotheses, 1.1)?;
-            let both = est.search_size_ends(&mut frame, hypotheses, 1.0)?;
-            assert_eq!((small.len(), large.len()), (1, 1));
-            // Each walks inward from its end, as far as the subject's size.
-            assert!(small[0].scale < 0.95 && large[0].scale < 1.15);
-            Ok::<_, crate::error::Error>(both)
+            Ok::<_, crate::error::Error>((
+                est.search_size_end(&mut frame, hypotheses, 0.9)?,
+                est.search_size_end(&mut frame, hypotheses, 1.1)?,
+                est.search_size_end(&mut frame, hypotheses, 1.0)?,
+            ))
         })
         .unwrap();
-        // At the model's size: one search per end, best-ranked first: the small end,
-        // sized near 1.50/1.75.
-        assert_eq!(ends.len(), 2);
-        let rank = |s: &SizedFit| est.rank(s.score, &s.fit.pose);
-        assert!(rank(&ends[0]) <= rank(&ends[1]));
-        assert!(
-            (0.8..=0.9).contains(&ends[0].scale),
-            "size {}",
-            ends[0].scale
-        );
-        let error = sized_joint_error(&ends[0], &subject, &pose);
+        // A size that did not lean says nothing: no search.
+        assert!(none.is_none());
+        // From the small end, sized near 1.50/1.75 = 0.857.
+        let small = small.expect("searched");
+        assert!((0.8..=0.9).contains(&small.scale), "size {}", small.scale);
+        let error = sized_joint_error(&small, &subject, &pose);
         assert!(error < 0.05, "mean joint error {error}");
+        // From the large end the walk comes inward as far as the subject's size allows.
+        let large = large.expect("searched");
+        assert!(large.scale < 1.15, "size {}", large.scale);
+        let rank = |s: &SizedFit| est.rank(s.score, &s.fit.pose);
+        assert!(rank(&small) < rank(&large));
     }
 
     #[test]
