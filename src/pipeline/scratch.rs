@@ -11,9 +11,9 @@
 //! fit explains the depth badly too, the body may be one no template resembles
 //! (airborne, tucked, split): the neutral bodies at every orientation
 //! ([`super::neutral`]) are fitted as well and the better-ranked reading competes. When
-//! the result still explains the depth badly and its size leans away from the model's,
-//! the first search runs again with the body at the end of the size range it leans
-//! toward (`Estimator::search_size_end`), for a subject whose size misled it. Frames
+//! the result still explains the depth badly, the first search runs again with the body
+//! at the end of the size range toward which its size search leaned
+//! (`Estimator::search_size_end`), for a subject whose size misled it. Frames
 //! explained well pay for none of these.
 
 use super::estimator::{Estimator, Frame};
@@ -71,7 +71,7 @@ impl Estimator {
             // Still explained badly: the subject's size may be far enough from the
             // model's that the search, at the model's size, preferred a wrong reading.
             // The ends of the size range are less likely too: `switch_margin` again.
-            if let Some(other) = self.search_size_end(frame, hypotheses, sized.scale)? {
+            if let Some(other) = self.search_size_end(frame, hypotheses, sized.lean)? {
                 let keep = 1.0 - self.config().switch_margin;
                 let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
                 if rank(&other) < rank(&sized) * keep {

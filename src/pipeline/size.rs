@@ -13,8 +13,8 @@
 //! Only the search's best reading is sized, and the search compares its readings at the
 //! model's size, where a subject far from it can be explained better by a wrong reading
 //! than by the right one. A result that still explains the depth badly is searched again
-//! with the body at the end of the size range toward which its size leans
-//! (`Estimator::search_size_end`).
+//! with the body at the end of the size range toward which its size search
+//! leaned (`Estimator::search_size_end`).
 
 use super::estimator::{Estimator, Frame};
 use crate::body::{BodyModel, Pose, NUM_SHAPE_FACTORS};
@@ -30,6 +30,9 @@ pub struct SizedFit {
     pub score: f64,
     /// The body's size relative to the estimator's model.
     pub scale: f64,
+    /// Which way the size search leaned: −1 or +1 when the smaller or the larger of the
+    /// two sizes first tried beside its start ranked better, 0 when none was tried.
+    pub lean: f64,
     /// The body.
     pub model: BodyModel,
 }
@@ -92,8 +95,10 @@ impl Estimator {
             fit,
             score,
             scale: 1.0 + from as f64 * step,
+            lean: 0.0,
             model: self.model_at_size(from)?,
         };
+        let mut lean = 0.0;
         if steps > 0 {
             let mut rank = self.rank(best.score, &best.fit.pose);
             // One short EM from the fitted pose per size: it is on the body already.
@@ -107,9 +112,16 @@ impl Estimator {
                 let tried = self.fits_at_sizes(frame, &config, &start, &scales)?;
                 low = low.min(round.iter().copied().min().unwrap_or(from));
                 high = high.max(round.iter().copied().max().unwrap_or(from));
+                let ranks: Vec<f64> = tried
+                    .iter()
+                    .map(|t| self.rank(t.score, &t.fit.pose))
+                    .collect();
+                if lean == 0.0 {
+                    let better = (0..round.len()).min_by(|&a, &b| ranks[a].total_cmp(&ranks[b]));
+                    lean = better.map_or(0.0, |i| (round[i] - from).signum() as f64);
+                }
                 let mut moved = None;
-                for (t, &k) in tried.into_iter().zip(&round) {
-                    let r = self.rank(t.score, &t.fit.pose);
+                for ((t, &k), &r) in tried.into_iter().zip(&round).zip(&ranks) {
                     if r < rank {
                         rank = r;
                         moved = Some(k);
@@ -130,28 +142,29 @@ impl Estimator {
             }
         }
         best.fit = self.label_all(frame, best.fit, &best.model)?;
+        best.lean = lean;
         Ok(best)
     }
 
     /// The first search ([`Self::search`], then the limb poses and the turns) made with
-    /// the body at the end of the size range toward which `scale` leans, its fit then
-    /// sized by walking inward from there. `scale` is the size found for the reading
-    /// the search preferred: wrong as that reading may be, it was fitted to the same
-    /// pixels. At the model's size a subject far from it may be explained better by a
-    /// wrong reading (upside down, the limbs crossed) than by the right one, which then
-    /// never reaches the size search. None when `scale` is the model's size (nothing
-    /// says the size misled the search) or no size is searched.
+    /// the body at the end of the size range toward which `lean` points, its fit then
+    /// sized by walking inward from there. `lean` is the way the size search leaned for
+    /// the reading the search preferred ([`SizedFit::lean`]): wrong as that reading may
+    /// be, it was fitted to the same pixels. At the model's size a subject far from it
+    /// may be explained better by a wrong reading (upside down, the limbs crossed) than
+    /// by the right one, which then never reaches the size search. None when `lean` is
+    /// 0 or no size is searched.
     pub(crate) fn search_size_end(
         &self,
         frame: &mut Frame,
         hypotheses: usize,
-        scale: f64,
+        lean: f64,
     ) -> Result<Option<SizedFit>> {
         let steps = self.size_steps();
-        if steps == 0 || (scale - 1.0).abs() < 1e-9 {
+        if steps == 0 || lean == 0.0 {
             return Ok(None);
         }
-        let end = if scale < 1.0 { -steps } else { steps };
+        let end = if lean < 0.0 { -steps } else { steps };
         let mut at_end = self.clone();
         at_end.set_model(self.model_at_size(end)?);
         let (best, score) = at_end.search(frame, &[], hypotheses, None)?;
@@ -191,6 +204,7 @@ impl Estimator {
                     fit,
                     score,
                     scale,
+                    lean: 0.0,
                     model,
                 }
             })
@@ -279,6 +293,8 @@ mod tests {
         })
         .unwrap();
         assert!((sized.scale - 0.95).abs() < 0.026, "size {}", sized.scale);
+        // Only the larger neighbour of the range's end was tried first: it leaned there.
+        assert_eq!(sized.lean, 1.0);
         let error = sized_joint_error(&sized, &subject, &pose);
         assert!(error < 0.03, "mean joint error {error}");
     }
@@ -292,13 +308,13 @@ mod tests {
             let mut frame = est.prepare(&depth, None, None)?;
             let hypotheses = est.config().hypotheses;
             Ok::<_, crate::error::Error>((
-                est.search_size_end(&mut frame, hypotheses, 0.9)?,
-                est.search_size_end(&mut frame, hypotheses, 1.1)?,
+                est.search_size_end(&mut frame, hypotheses, -1.0)?,
                 est.search_size_end(&mut frame, hypotheses, 1.0)?,
+                est.search_size_end(&mut frame, hypotheses, 0.0)?,
             ))
         })
         .unwrap();
-        // A size that did not lean says nothing: no search.
+        // A size search that did not lean says nothing: no search.
         assert!(none.is_none());
         // From the small end, sized near 1.50/1.75 = 0.857.
         let small = small.expect("searched");
