@@ -1899,7 +1899,8 @@ class PipelineConfig:
         Template hypotheses of a re-check and of a lost frame. Default 4 and 8.
     switch_margin
         A re-check switches when it explains the depth better by this share, and from
-        scratch the wide search's fit replaces the first by the same. Default 0.1.
+        scratch the wide search's and the size end's fits replace the first by the
+        same. Default 0.1.
     pose_prior_weight
         Weight of the rest-pose penalty where poses compete. Default 0.005.
     size_range, size_step
@@ -1907,7 +1908,10 @@ class PipelineConfig:
         fit is refitted with the body scaled by 1 ± k·``size_step`` up to
         ± ``size_range`` and the size whose body explains the depth best is kept
         (``result.shape``); a tracker does so on its first frame and calibrates the
-        shape from there. 0 turns it off. Default 0.15 and 0.05.
+        shape from there. A result that still explains the depth worse than
+        ``lost_discrepancy`` is searched again with the body at the end of the range
+        the size search leaned toward (``timings["sizes"]``), and that fit is kept when
+        it ranks better by ``switch_margin``. 0 turns it off. Default 0.15 and 0.05.
     calibration_frames, calibration_every, calibration_prior_weight, calibration_rounds
         Tracking: shape calibration over this many usable frames (0 = never), every
         this many, with this prior weight and rounds. Default 8, 1, 1e5 and 3.

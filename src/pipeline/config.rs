@@ -64,7 +64,7 @@ pub struct PipelineConfig {
     /// Tracking: template hypotheses refined when the track is lost.
     pub lost_hypotheses: usize,
     /// "Clearly better": a lower discrepancy by at least this share. From scratch, the
-    /// wide search's fit replaces the first by the same margin.
+    /// wide search's and the size end's fits replace the first by the same margin.
     pub switch_margin: f64,
     /// Weight of the rest-pose term added to the depth discrepancy wherever poses
     /// compete: `pose_prior_weight` × Σ θ² over the 14 limb angles (radians; 0 is the
@@ -73,8 +73,10 @@ pub struct PipelineConfig {
     pub pose_prior_weight: f64,
     /// From scratch, when the subject's shape is not given, the best fit is also
     /// refitted with the body scaled by 1 ± k·`size_step` up to ± `size_range`, and the
-    /// size explaining the depth best is kept ([`super::size`]; 0 = never). A tracker
-    /// does so on its first frame and calibrates the shape from there.
+    /// size explaining the depth best is kept ([`super::size`]; 0 = never). A result
+    /// still explained badly is searched again with the body at the end of the range
+    /// the size search leaned toward. A tracker does so on its first frame and
+    /// calibrates the shape from there.
     pub size_range: f64,
     /// ... in steps of this share of the model's size.
     pub size_step: f64,
