@@ -25,7 +25,7 @@ impl Estimator {
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
     /// labelled at every pixel. Laps `clock` at "templates", "fit" and, when the wide
     /// search runs, "wide" (and "neutral" for the neutral bodies' fits), and "sizes" when
-    /// the searches at the ends of the size range run.
+    /// the search at an end of the size range runs.
     pub(crate) fn fit_from_scratch(
         &self,
         frame: &mut Frame,

@@ -32,7 +32,7 @@ pub struct SizedFit {
     pub scale: f64,
     /// Which way the size search leaned: −1 or +1 when the smaller or the larger of the
     /// two sizes first tried beside its start ranked better, 0 when none was tried.
-    pub lean: f64,
+    pub lean: i64,
     /// The body.
     pub model: BodyModel,
 }
@@ -95,10 +95,10 @@ impl Estimator {
             fit,
             score,
             scale: 1.0 + from as f64 * step,
-            lean: 0.0,
+            lean: 0,
             model: self.model_at_size(from)?,
         };
-        let mut lean = 0.0;
+        let mut lean = 0;
         if steps > 0 {
             let mut rank = self.rank(best.score, &best.fit.pose);
             // One short EM from the fitted pose per size: it is on the body already.
@@ -116,9 +116,9 @@ impl Estimator {
                     .iter()
                     .map(|t| self.rank(t.score, &t.fit.pose))
                     .collect();
-                if lean == 0.0 {
+                if lean == 0 {
                     let better = (0..round.len()).min_by(|&a, &b| ranks[a].total_cmp(&ranks[b]));
-                    lean = better.map_or(0.0, |i| (round[i] - from).signum() as f64);
+                    lean = better.map_or(0, |i| (round[i] - from).signum());
                 }
                 let mut moved = None;
                 for ((t, &k), &r) in tried.into_iter().zip(&round).zip(&ranks) {
@@ -158,13 +158,13 @@ impl Estimator {
         &self,
         frame: &mut Frame,
         hypotheses: usize,
-        lean: f64,
+        lean: i64,
     ) -> Result<Option<SizedFit>> {
         let steps = self.size_steps();
-        if steps == 0 || lean == 0.0 {
+        if steps == 0 || lean == 0 {
             return Ok(None);
         }
-        let end = if lean < 0.0 { -steps } else { steps };
+        let end = lean.signum() * steps;
         let mut at_end = self.clone();
         at_end.set_model(self.model_at_size(end)?);
         let (best, score) = at_end.search(frame, &[], hypotheses, None)?;
@@ -204,7 +204,7 @@ impl Estimator {
                     fit,
                     score,
                     scale,
-                    lean: 0.0,
+                    lean: 0,
                     model,
                 }
             })
@@ -294,7 +294,7 @@ mod tests {
         .unwrap();
         assert!((sized.scale - 0.95).abs() < 0.026, "size {}", sized.scale);
         // Only the larger neighbour of the range's end was tried first: it leaned there.
-        assert_eq!(sized.lean, 1.0);
+        assert_eq!(sized.lean, 1);
         let error = sized_joint_error(&sized, &subject, &pose);
         assert!(error < 0.03, "mean joint error {error}");
     }
@@ -308,9 +308,9 @@ mod tests {
             let mut frame = est.prepare(&depth, None, None)?;
             let hypotheses = est.config().hypotheses;
             Ok::<_, crate::error::Error>((
-                est.search_size_end(&mut frame, hypotheses, -1.0)?,
-                est.search_size_end(&mut frame, hypotheses, 1.0)?,
-                est.search_size_end(&mut frame, hypotheses, 0.0)?,
+                est.search_size_end(&mut frame, hypotheses, -1)?,
+                est.search_size_end(&mut frame, hypotheses, 1)?,
+                est.search_size_end(&mut frame, hypotheses, 0)?,
             ))
         })
         .unwrap();
