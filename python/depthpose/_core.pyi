@@ -58,6 +58,7 @@ __all__ = [
     "_check_number",
     "_check_numbers",
     "_euler_zxy",
+    "_not_numbers",
     "_sequence_camera",
     "_stereo_pairs",
     "alpha_beta_swap",
@@ -175,6 +176,10 @@ def _check_mask(
 def _check_numbers(value: object, name: str, *, ndim: int | None = None) -> npt.NDArray[np.float64]:
     """A numeric array (or a list of numbers), any layout, as float64, without NaN or
     inf."""
+
+def _not_numbers(dtype: np.dtype[Any]) -> str | None:
+    """Why ``dtype`` cannot hold numbers (None if it can), in the words of the native
+    converters' errors."""
 
 # ---- camera -------------------------------------------------------------------------
 @final

@@ -11,8 +11,6 @@ anything is copied (see ``docs/robustness.md``).
 
 from __future__ import annotations
 
-import numpy as np
-
 from ._core import _check_array as array
 from ._core import _check_integer as integer
 from ._core import _check_mask as mask
@@ -20,17 +18,3 @@ from ._core import _check_number as number
 from ._core import _check_numbers as numbers_array
 
 __all__ = ["array", "integer", "mask", "number", "numbers_array"]
-
-
-def _not_numbers(dtype: np.dtype) -> str | None:
-    """Why ``dtype`` cannot hold numbers (None if it can)."""
-    kind = dtype.kind
-    if kind in "fiu":
-        return None
-    return {
-        "b": "a bool array where numbers are expected",
-        "c": "complex numbers are not supported",
-        "O": "an object array; convert it with numpy.asarray(x, dtype=float)",
-        "U": "a string array where numbers are expected",
-        "S": "a string array where numbers are expected",
-    }.get(kind, "not a numeric array")

@@ -73,7 +73,7 @@ def colorize_depth(
 def _picture_values(value: object, name: str) -> np.ndarray:
     """A numeric array (NaN allowed) as float32, within the image size limit."""
     a = _validate.array(value, name, image=4)
-    why = _validate._not_numbers(a.dtype)
+    why = _core._not_numbers(a.dtype)
     if why is not None:
         cls = InvalidInputError if a.dtype.kind == "b" else InvalidTypeError
         raise cls(f"{name}: dtype {a.dtype}: {why}")
@@ -201,7 +201,7 @@ def draw_skeleton(
     j = _validate.array(
         np.asarray(joints) if isinstance(joints, (list, tuple)) else joints, "joints"
     )
-    if j.shape != (15, 3) or _validate._not_numbers(j.dtype) is not None:
+    if j.shape != (15, 3) or _core._not_numbers(j.dtype) is not None:
         raise InvalidInputError(f"joints: expected (15, 3) numbers, got {j.shape} {j.dtype}")
     joints = j.astype(np.float64)
     if np.isinf(joints).any():
@@ -211,7 +211,7 @@ def draw_skeleton(
             np.asarray(confidence) if isinstance(confidence, (list, tuple)) else confidence,
             "confidence",
         )
-        if c.shape != (15,) or _validate._not_numbers(c.dtype) is not None:
+        if c.shape != (15,) or _core._not_numbers(c.dtype) is not None:
             raise InvalidInputError(f"confidence: expected (15,) numbers, got {c.shape} {c.dtype}")
         joints[~(c.astype(np.float64) > 0)] = np.nan
     if not np.isfinite(joints).any():

@@ -3,12 +3,12 @@
 //! an argument by the rules and with the messages of the native functions.
 
 use super::convert::{
-    array_like, bool_array, check_image_pixels, f64_array, invalid, to_numpy, too_large, type_name,
-    wrong_type, Int, Real, Text, MAX_ARRAY_ELEMENTS, MAX_IMAGE_PIXELS,
+    array_like, bool_array, check_image_pixels, f64_array, invalid, not_numeric, to_numpy,
+    too_large, type_name, wrong_type, Int, Real, Text, MAX_ARRAY_ELEMENTS, MAX_IMAGE_PIXELS,
 };
 use super::InvalidTypeError;
 use crate::error::brief;
-use numpy::{PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::{PyArrayDescr, PyArrayDescrMethods, PyArrayDyn, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
 
 /// The name argument of a check ("value" when it is not a string).
@@ -132,18 +132,13 @@ fn check_array<'a, 'py>(
     if image > 0 && shape.len() >= 2 {
         check_image_pixels(shape[0], shape[1], name)?;
     }
-    let (limit, most) = if image > 0 {
-        ("MAX_IMAGE_PIXELS", image.saturating_mul(MAX_IMAGE_PIXELS))
+    let (limit, value) = if image > 0 {
+        ("MAX_IMAGE_PIXELS", MAX_IMAGE_PIXELS)
     } else {
         ("MAX_ARRAY_ELEMENTS", MAX_ARRAY_ELEMENTS)
     };
-    if a.len() > most {
+    if a.len() > value.saturating_mul(image.max(1)) {
         let shown = crate::io::npy::shape_text(shape);
-        let value = if image > 0 {
-            MAX_IMAGE_PIXELS
-        } else {
-            MAX_ARRAY_ELEMENTS
-        };
         return Err(too_large(
             name,
             format!(
@@ -191,7 +186,15 @@ fn _check_numbers<'py>(
     to_numpy(py, a.data, &a.shape)
 }
 
+/// Why `dtype` cannot hold numbers (None if it can), in the words of the native
+/// converters' errors.
+#[pyfunction]
+fn _not_numbers(dtype: &Bound<'_, PyArrayDescr>) -> Option<&'static str> {
+    not_numeric(dtype.kind())
+}
+
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(_not_numbers, m)?)?;
     m.add_function(wrap_pyfunction!(_check_integer, m)?)?;
     m.add_function(wrap_pyfunction!(_check_number, m)?)?;
     m.add_function(wrap_pyfunction!(_check_array, m)?)?;

@@ -100,8 +100,8 @@ fn untyped<'a, 'py>(
     Ok(arr)
 }
 
-/// Why the dtype `dt` cannot hold numbers, or None if it can.
-fn not_numeric(kind: u8) -> Option<&'static str> {
+/// Why a dtype of numpy kind `kind` cannot hold numbers, or None if it can.
+pub fn not_numeric(kind: u8) -> Option<&'static str> {
     match kind {
         b'f' | b'i' | b'u' => None,
         b'b' => Some("a bool array where numbers are expected"),
