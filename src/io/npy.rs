@@ -209,25 +209,37 @@ impl Array {
         self.len() == 0
     }
 
-    /// The element at `k` in C order (the last axis fastest) as 8 little-endian bytes,
-    /// zero-extended; `None` past the end of the data.
-    fn element(&self, k: usize) -> Option<[u8; 8]> {
-        let d = self.dtype;
-        let mut at = k;
-        if self.fortran && self.shape.len() > 1 {
-            // The Fortran-order offset of the C-order index `k`.
-            let (mut rest, mut stride) = (k, 1);
-            at = 0;
-            let mut strides = vec![0; self.shape.len()];
-            for (s, n) in strides.iter_mut().zip(&self.shape) {
-                *s = stride;
-                stride *= n;
-            }
-            for (s, &n) in strides.iter().zip(&self.shape).rev() {
-                at += (rest % n.max(1)) * s;
-                rest /= n.max(1);
+    /// The data index of each C-order index (the last axis fastest): the index itself
+    /// for C-order data, else its Fortran-order offset (the strides computed once).
+    fn data_index(&self) -> impl Fn(usize) -> usize + '_ {
+        let strides: Option<Vec<usize>> = (self.fortran && self.shape.len() > 1).then(|| {
+            let mut stride = 1;
+            self.shape
+                .iter()
+                .map(|&n| {
+                    let s = stride;
+                    stride *= n;
+                    s
+                })
+                .collect()
+        });
+        move |k| match &strides {
+            None => k,
+            Some(strides) => {
+                let (mut rest, mut at) = (k, 0);
+                for (s, &n) in strides.iter().zip(&self.shape).rev() {
+                    at += (rest % n.max(1)) * s;
+                    rest /= n.max(1);
+                }
+                at
             }
         }
+    }
+
+    /// The element at data index `at` as 8 little-endian bytes, zero-extended; `None`
+    /// past the end of the data.
+    fn element(&self, at: usize) -> Option<[u8; 8]> {
+        let d = self.dtype;
         let bytes = self.data.get(at * d.size..(at + 1) * d.size)?;
         let mut le = [0u8; 8];
         le.get_mut(..d.size)?.copy_from_slice(bytes);
@@ -244,9 +256,10 @@ impl Array {
         if !matches!(d.kind, Kind::Bool | Kind::Int | Kind::Uint | Kind::Float) || d.size > 8 {
             return None;
         }
+        let index = self.data_index();
         (0..self.len())
             .map(|k| {
-                let le = self.element(k)?;
+                let le = self.element(index(k))?;
                 Some(match (d.kind, d.size) {
                     (Kind::Float, 2) => f64::from(f16_to_f32(u16::from_le_bytes([le[0], le[1]]))),
                     (Kind::Float, 4) => f64::from(f32::from_le_bytes([le[0], le[1], le[2], le[3]])),
@@ -272,9 +285,10 @@ impl Array {
             return None;
         }
         let scale = scale as f32;
+        let index = self.data_index();
         range
             .map(|k| {
-                let le = self.element(k)?;
+                let le = self.element(index(k))?;
                 Some(match d.size {
                     _ if uint16 => f32::from(u16::from_le_bytes([le[0], le[1]])) * scale,
                     2 => f16_to_f32(u16::from_le_bytes([le[0], le[1]])),
@@ -570,26 +584,20 @@ pub fn read_depth(path: &Path, scale: f64) -> Result<Image> {
     }
     let raw =
         read_data(&mut f, &h).map_err(|m| file_err(format!("not a readable .npy file ({m})")))?;
-    let value = |k: usize| -> f32 {
-        let b = &raw[k * d.size..(k + 1) * d.size];
-        let mut le = [0u8; 8];
-        le[..d.size].copy_from_slice(b);
-        if d.big_endian {
-            le[..d.size].reverse();
-        }
-        match (d.kind, d.size) {
-            (Kind::Uint, _) => u16::from_le_bytes([le[0], le[1]]) as f32 * scale as f32,
-            (_, 2) => f16_to_f32(u16::from_le_bytes([le[0], le[1]])),
-            (_, 4) => f32::from_le_bytes([le[0], le[1], le[2], le[3]]),
-            _ => f64::from_le_bytes(le) as f32,
-        }
+    let array = Array {
+        dtype: d,
+        shape: h.shape,
+        fortran: h.fortran,
+        data: raw,
     };
-    let data: Vec<f32> = (0..height * width)
-        .map(|k| {
-            let (r, c) = (k / width, k % width);
-            value(if h.fortran { c * height + r } else { k })
-        })
-        .collect();
+    // The dtype is checked above and `read_data` read the whole data.
+    let data = array
+        .depth_values(scale, 0..height * width)
+        .ok_or_else(|| {
+            file_err(format!(
+                "not a readable .npy file (truncated: shape {shape})"
+            ))
+        })?;
     let img = Image {
         data,
         height,
