@@ -643,6 +643,42 @@ mod tests {
     }
 
     #[test]
+    fn values_come_in_c_order_whatever_the_data_order() {
+        // C-order values 0..24 of a (2, 3, 4) array, stored in Fortran order: the
+        // element at (i, j, k) sits at data index i + 2j + 6k.
+        let shape = [2usize, 3, 4];
+        let mut fortran = vec![0f32; 24];
+        for c in 0..24 {
+            let (i, j, k) = (c / 12, c / 4 % 3, c % 4);
+            fortran[i + 2 * j + 6 * k] = c as f32;
+        }
+        let bytes = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+        let c_order: Vec<f32> = (0..24).map(|c| c as f32).collect();
+        for (data, is_fortran) in [(&fortran, true), (&c_order, false)] {
+            let a = Array {
+                dtype: Dtype::parse("<f4").unwrap(),
+                shape: shape.to_vec(),
+                fortran: is_fortran,
+                data: bytes(data),
+            };
+            let expected: Vec<f64> = (0..24).map(f64::from).collect();
+            assert_eq!(a.to_f64().unwrap(), expected);
+            assert_eq!(a.depth_values(1.0, 12..24).unwrap(), c_order[12..]);
+        }
+        // Big-endian uint16 units scaled to metres, in C order.
+        let a = Array {
+            dtype: Dtype::parse(">u2").unwrap(),
+            shape: vec![2, 2],
+            fortran: true,
+            data: [2u16, 6, 4, 8]
+                .iter()
+                .flat_map(|v| v.to_be_bytes())
+                .collect(),
+        };
+        assert_eq!(a.depth_values(0.5, 0..4).unwrap(), [1.0, 2.0, 3.0, 4.0]);
+    }
+
+    #[test]
     fn headers_are_numpys() {
         let bytes = file("<f4", false, &[2, 3], &[0; 24]);
         assert_eq!(&bytes[..8], b"\x93NUMPY\x01\x00");
