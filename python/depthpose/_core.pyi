@@ -1903,9 +1903,10 @@ class PipelineConfig:
     recheck_hypotheses, lost_hypotheses
         Template hypotheses of a re-check and of a lost frame. Default 4 and 8.
     switch_margin
-        A re-check switches when it explains the depth better by this share, and from
+        A re-check switches when it explains the depth better by this share; from
         scratch the wide search's and the size end's fits replace the first by the
-        same. Default 0.1.
+        same, and on a lost frame a re-initialised limb replaces the tracked one by it
+        too. Default 0.1.
     pose_prior_weight
         Weight of the rest-pose penalty where poses compete. Default 0.005.
     size_range, size_step
@@ -2215,7 +2216,7 @@ class PoseTracker:
         """Frames on which the track was lost and the template search ran."""
     @property
     def switches(self) -> int:
-        """Times a re-check switched the track to a better pose."""
+        """Frames on which the track switched to a search's result or re-initialised a limb."""
     @property
     def calibrating(self) -> bool:
         """Whether the tracker is still collecting frames to calibrate the shape."""

@@ -64,7 +64,8 @@ pub struct PipelineConfig {
     /// Tracking: template hypotheses refined when the track is lost.
     pub lost_hypotheses: usize,
     /// "Clearly better": a lower discrepancy by at least this share. From scratch, the
-    /// wide search's and the size end's fits replace the first by the same margin.
+    /// wide search's and the size end's fits replace the first by the same margin, and
+    /// on a lost frame a re-initialised limb replaces the tracked one by it too.
     pub switch_margin: f64,
     /// Weight of the rest-pose term added to the depth discrepancy wherever poses
     /// compete: `pose_prior_weight` × Σ θ² over the 14 limb angles (radians; 0 is the

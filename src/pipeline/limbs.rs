@@ -44,8 +44,9 @@ pub const LEG_POSES: [[f64; 3]; 10] = [
     [1.8, 0.2, 2.4],    // crouched
 ];
 
-/// The limbs: first angle of each in the pose, and whether it is an arm.
-const LIMBS: [(usize, bool); 4] = [
+/// The limbs: first angle of each in the pose, and whether it is an arm. Opposite
+/// limbs are neighbours (right, then left), so limb `k`'s opposite is `k ^ 1`.
+pub(crate) const LIMBS: [(usize, bool); 4] = [
     (param::R_SHOULDER, true),
     (param::L_SHOULDER, true),
     (param::R_HIP, false),
@@ -59,17 +60,41 @@ fn with_limb(pose: &Pose, first: usize, angles: &[f64]) -> Pose {
     out
 }
 
-/// `pose` with its limbs set, one after the other, to the pose of the set that ranks
-/// best by `rank` when it ranks below the current one. Returns the pose, its rank and
-/// whether any limb changed.
+/// The pose of `pose` with limb `k` of [`LIMBS`] set to the angles of the opposite
+/// limb: its mirror image (the joint angles of both sides share one convention).
+fn mirrored_limb(pose: &Pose, k: usize) -> Pose {
+    let (first, arm) = LIMBS[k];
+    let (other, _) = LIMBS[k ^ 1];
+    let n = if arm { 4 } else { 3 };
+    let mut out = *pose;
+    out[first..first + n].copy_from_slice(&pose[other..other + n]);
+    out
+}
+
+/// Which limbs are re-posed, from which poses, and by how much the refit must win.
+pub(crate) struct LimbSearch<'a> {
+    /// Indices into [`LIMBS`].
+    pub limbs: &'a [usize],
+    /// Also try each limb in the opposite limb's pose (its mirror image).
+    pub mirrored: bool,
+    /// The refit replaces the fit when it ranks lower by this share.
+    pub margin: f64,
+}
+
+/// `pose` with each of `search.limbs` set, one after the other, to the pose of the set
+/// (and, when `search.mirrored`, to the opposite limb's pose) that ranks best by `rank`
+/// when it ranks below the current one. Returns the pose, its rank and whether any limb
+/// changed.
 pub(crate) fn best_limbs(
     pose: &Pose,
     current: f64,
+    search: &LimbSearch,
     mut rank: impl FnMut(&[Pose]) -> Result<Vec<f64>>,
 ) -> Result<(Pose, f64, bool)> {
     let (mut pose, mut best, mut changed) = (*pose, current, false);
-    for (first, arm) in LIMBS {
-        let starts: Vec<Pose> = if arm {
+    for &k in search.limbs {
+        let (first, arm) = LIMBS[k];
+        let mut starts: Vec<Pose> = if arm {
             ARM_POSES
                 .iter()
                 .map(|a| with_limb(&pose, first, a))
@@ -80,6 +105,9 @@ pub(crate) fn best_limbs(
                 .map(|a| with_limb(&pose, first, a))
                 .collect()
         };
+        if search.mirrored {
+            starts.push(mirrored_limb(&pose, k));
+        }
         let ranks = rank(&starts)?;
         for (start, r) in starts.into_iter().zip(ranks) {
             if r < best {
@@ -103,24 +131,43 @@ impl Estimator {
         if !self.config().limb_poses {
             return Ok((fit, score));
         }
+        let search = LimbSearch {
+            limbs: &[0, 1, 2, 3],
+            mirrored: false,
+            margin: 0.0,
+        };
+        let (fit, score, _) = self.repose(frame, fit, score, &search)?;
+        Ok((fit, score))
+    }
+
+    /// `fit` (with `score`, its depth discrepancy) with the limbs of `search` set to
+    /// their best-ranked poses ([`best_limbs`]) and refitted briefly (the rest of the
+    /// body is fitted already); the refit is kept when it ranks lower by
+    /// `search.margin`. Returns the fit kept, its discrepancy and whether it changed.
+    pub(crate) fn repose(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        score: f64,
+        search: &LimbSearch,
+    ) -> Result<(FitResult, f64, bool)> {
         let current = self.rank(score, &fit.pose);
-        let (start, _, changed) = best_limbs(&fit.pose, current, |poses| {
+        let (start, _, changed) = best_limbs(&fit.pose, current, search, |poses| {
             Ok(self.rankings(&self.discrepancies(frame, poses)?, poses))
         })?;
         if !changed {
-            return Ok((fit, score));
+            return Ok((fit, score, false));
         }
-        // The rest of the body is fitted already: a short refit.
         let config = self.config().short_refit();
         let refit = self
             .fits(frame, &config, &[start], None, None)?
             .pop()
             .expect("one fit");
         let (refit_score, _) = self.discrepancy(frame, &refit.pose);
-        if self.rank(refit_score, &refit.pose) < current {
-            Ok((refit, refit_score))
+        if self.rank(refit_score, &refit.pose) < current * (1.0 - search.margin) {
+            Ok((refit, refit_score, true))
         } else {
-            Ok((fit, score))
+            Ok((fit, score, false))
         }
     }
 }
@@ -190,13 +237,30 @@ mod tests {
         let dist = |p: &Pose| -> f64 { p.iter().zip(&target).map(|(a, b)| (a - b).abs()).sum() };
         let rank = |poses: &[Pose]| Ok(poses.iter().map(dist).collect());
         let start = BodyModel::neutral_pose();
-        let (pose, r, changed) = best_limbs(&start, dist(&start), rank).unwrap();
+        let all = LimbSearch {
+            limbs: &[0, 1, 2, 3],
+            mirrored: false,
+            margin: 0.0,
+        };
+        let (pose, r, changed) = best_limbs(&start, dist(&start), &all, rank).unwrap();
         assert!(changed);
         assert_eq!(pose, target);
         assert!(r.abs() < 1e-12);
         // Nothing ranks below the target itself: it stays as it is.
-        let (same, _, changed) = best_limbs(&target, 0.0, rank).unwrap();
+        let (same, _, changed) = best_limbs(&target, 0.0, &all, rank).unwrap();
         assert!(!changed);
         assert_eq!(same, target);
+    }
+
+    #[test]
+    fn the_mirrored_limb_takes_the_opposite_limbs_angles() {
+        let mut pose = BodyModel::neutral_pose();
+        pose[param::L_HIP..param::L_HIP + 3].copy_from_slice(&[1.2, 0.3, 0.9]);
+        let m = mirrored_limb(&pose, 2);
+        assert_eq!(m[param::R_HIP..param::R_HIP + 3], [1.2, 0.3, 0.9]);
+        assert_eq!(m[param::L_HIP..param::L_HIP + 3], [1.2, 0.3, 0.9]);
+        let mut rest = m;
+        rest[param::R_HIP..param::R_HIP + 3].copy_from_slice(&pose[param::R_HIP..param::R_HIP + 3]);
+        assert_eq!(rest, pose);
     }
 }

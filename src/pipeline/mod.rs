@@ -13,6 +13,7 @@ pub mod config;
 pub mod estimator;
 pub mod hypotheses;
 pub mod limbs;
+pub mod lost_limbs;
 pub mod neutral;
 pub mod orientation;
 pub mod resolution;

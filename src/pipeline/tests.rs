@@ -19,7 +19,7 @@ pub(crate) fn default_templates() -> Arc<TemplateDatabase> {
 }
 
 /// The floor 1 m below the camera and a wall 5 m away, seen by the ITOP camera.
-fn room(camera: &Camera) -> Vec<f32> {
+pub(crate) fn room(camera: &Camera) -> Vec<f32> {
     let mut out = vec![0.0f32; camera.width * camera.height];
     for row in 0..camera.height {
         for col in 0..camera.width {

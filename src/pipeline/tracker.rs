@@ -5,11 +5,13 @@
 //! the fitted body explains too little of the person or the depth much worse than
 //! lately; a lost frame runs the template search (with the tracked pose and its
 //! readings with left and right exchanged — whole body, legs only, arms only — among
-//! the starts) and keeps its best. With `recheck_every` set, the search also runs every
-//! that many tracked frames, and the track switches when a hypothesis explains the depth
-//! clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
-//! as the stereo pipeline's) raises the absolute lost threshold by as much as its noise
-//! raises the discrepancy of a body that fits as well as the model can.
+//! the starts) and keeps its best. A lost frame's body that still draws a limb off the
+//! person has that limb re-initialised ([`super::lost_limbs`]). With `recheck_every`
+//! set, the search also runs every that many tracked frames, and the track switches
+//! when a hypothesis explains the depth clearly better. A sensor whose depth noise is
+//! known ([`Tracker::set_depth_noise`], as the stereo pipeline's) raises the absolute
+//! lost threshold by as much as its noise raises the discrepancy of a body that fits as
+//! well as the model can.
 //!
 //! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
 //! first frame ([`super::size`]). It then collects usable frames (any but a track's
@@ -78,7 +80,7 @@ pub struct Tracker {
     frames: usize,
     /// Frames whose track was lost.
     pub lost_frames: usize,
-    /// Frames where the track switched to a search's result.
+    /// Frames where the track switched to a search's result or re-initialised a limb.
     pub switches: usize,
     /// The learned background, when it learns one.
     background: Option<BackgroundModel>,
@@ -306,28 +308,31 @@ impl Tracker {
         let rank_best = est.rank(best_score, &best.pose);
         let rank_track = est.rank(score, &pose);
         let switch = rank_best < rank_track * (1.0 - margin);
-        if switch {
-            let best = est.label_all(&mut frame, best, est.model())?;
-            clock.lap("search");
-            let fitted = Fitted {
-                fit: best,
-                discrepancy: best_score,
-                model: est.model(),
-                rendered: None,
-            };
-            let res = est.result(&mut frame, fitted, Source::Templates, clock);
-            Ok((res, frame, true))
+        let (mut fit, mut score, mut rendered, source) = if switch {
+            (best, best_score, None, Source::Templates)
         } else {
-            clock.lap("search");
-            let fitted = Fitted {
-                fit,
-                discrepancy: score,
-                model: est.model(),
-                rendered: Some(rendered),
-            };
-            let res = est.result(&mut frame, fitted, Source::Tracking, clock);
-            Ok((res, frame, false))
+            (fit, score, Some(rendered), Source::Tracking)
+        };
+        let mut refound = false;
+        if lost {
+            // The body kept may still draw limbs off the person: re-initialise those.
+            (fit, score, refound) = est.refind_lost_limbs(&mut frame, fit, score)?;
+            if refound {
+                rendered = None;
+            }
         }
+        if switch || refound {
+            fit = est.label_all(&mut frame, fit, est.model())?;
+        }
+        clock.lap("search");
+        let fitted = Fitted {
+            fit,
+            discrepancy: score,
+            model: est.model(),
+            rendered,
+        };
+        let res = est.result(&mut frame, fitted, source, clock);
+        Ok((res, frame, switch || refound))
     }
 
     /// The previous pose moved on by the damped velocity, within the joint limits.
