@@ -65,7 +65,11 @@ fn with_limb(pose: &Pose, first: usize, angles: &[f64]) -> Pose {
 fn mirrored_limb(pose: &Pose, k: usize) -> Pose {
     let (first, arm) = LIMBS[k];
     let (other, _) = LIMBS[k ^ 1];
-    let n = if arm { 4 } else { 3 };
+    let n = if arm {
+        ARM_POSES[0].len()
+    } else {
+        LEG_POSES[0].len()
+    };
     let mut out = *pose;
     out[first..first + n].copy_from_slice(&pose[other..other + n]);
     out

@@ -19,7 +19,7 @@
 
 use super::estimator::{Estimator, Frame, DISCREPANCY_CAP};
 use super::limbs::{LimbSearch, LIMBS};
-use crate::body::{seg, Pose};
+use crate::body::{seg, Pose, NUM_SEGMENTS};
 use crate::error::Result;
 use crate::fit::FitResult;
 use crate::render::BACKGROUND_LABEL;
@@ -31,6 +31,22 @@ const LIMB_SEGMENTS: [[usize; 3]; 4] = [
     [seg::R_THIGH, seg::R_SHIN, seg::R_FOOT],
     [seg::L_THIGH, seg::L_SHIN, seg::L_FOOT],
 ];
+
+/// The limb of each body segment (an index into [`LIMBS`]); `usize::MAX` for the head,
+/// neck, torso and pelvis.
+const LIMB_OF_SEGMENT: [usize; NUM_SEGMENTS] = {
+    let mut limb_of = [usize::MAX; NUM_SEGMENTS];
+    let mut limb = 0;
+    while limb < LIMB_SEGMENTS.len() {
+        let mut k = 0;
+        while k < LIMB_SEGMENTS[limb].len() {
+            limb_of[LIMB_SEGMENTS[limb][k]] = limb;
+            k += 1;
+        }
+        limb += 1;
+    }
+    limb_of
+};
 
 /// Where a limb lies in the body rendered at a fit.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,18 +70,12 @@ pub(crate) fn limb_states(
     mask: &[bool],
     cap: f64,
 ) -> [LimbState; 4] {
-    let mut limb_of = [usize::MAX; crate::body::NUM_SEGMENTS];
-    for (limb, segments) in LIMB_SEGMENTS.iter().enumerate() {
-        for &s in segments {
-            limb_of[s] = limb;
-        }
-    }
     let (mut drawn, mut off) = ([0usize; 4], [0usize; 4]);
     for (((&label, &r), &d), &m) in labels.iter().zip(rendered).zip(depth).zip(mask) {
         if label == BACKGROUND_LABEL {
             continue;
         }
-        let limb = limb_of[label as usize];
+        let limb = LIMB_OF_SEGMENT[label as usize];
         if limb != usize::MAX {
             drawn[limb] += 1;
             let observed = d > 0.0 && d.is_finite();
@@ -135,20 +145,15 @@ mod tests {
     use super::*;
     use crate::body::{param, BodyModel, Pose};
     use crate::camera::Camera;
-    use crate::pipeline::tests::{estimator, room, room_posed, walking};
+    use crate::pipeline::limbs::ARM_POSES;
+    use crate::pipeline::tests::{estimator, mean_joint_distance, room, room_posed, walking};
     use crate::pipeline::PipelineConfig;
 
     /// `pose` with its right arm out sideways.
     fn arm_out(pose: &Pose) -> Pose {
         let mut out = *pose;
-        out[param::R_SHOULDER..param::R_SHOULDER + 4].copy_from_slice(&[0.0, 1.45, 0.0, 0.1]);
+        out[param::R_SHOULDER..param::R_SHOULDER + 4].copy_from_slice(&ARM_POSES[1]);
         out
-    }
-
-    /// The mean distance between the joints of two poses of `model`.
-    fn joint_error(model: &BodyModel, a: &Pose, b: &Pose) -> f64 {
-        let (a, b) = (model.joints(a), model.joints(b));
-        a.iter().zip(&b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len() as f64
     }
 
     #[test]
@@ -206,7 +211,7 @@ mod tests {
         .unwrap();
         let (fit, _, changed) = lost;
         assert!(changed);
-        let error = joint_error(&model, &fit.pose, &truth);
+        let error = mean_joint_distance(&model.joints(&fit.pose), &model.joints(&truth));
         assert!(error < 0.03, "mean joint error {error}");
         // No limb lost: the fit comes back as it was.
         let (fit, _, changed) = kept;

@@ -216,7 +216,7 @@ impl Estimator {
 mod tests {
     use super::*;
     use crate::camera::Camera;
-    use crate::pipeline::tests::{estimator, mean_joint_error_of, room_with};
+    use crate::pipeline::tests::{estimator, mean_joint_distance, mean_joint_error_of, room_with};
     use crate::pipeline::{PipelineConfig, Tracker};
 
     #[test]
@@ -268,8 +268,7 @@ mod tests {
 
     /// The mean distance between the joints of a sized fit and of `subject` at `pose`.
     fn sized_joint_error(sized: &SizedFit, subject: &BodyModel, pose: &Pose) -> f64 {
-        let (a, b) = (sized.model.joints(&sized.fit.pose), subject.joints(pose));
-        a.iter().zip(&b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len() as f64
+        mean_joint_distance(&sized.model.joints(&sized.fit.pose), &subject.joints(pose))
     }
 
     #[test]

@@ -5,6 +5,7 @@ use super::*;
 use crate::body::{BodyModel, Pose};
 use crate::camera::Camera;
 use crate::templates::{TemplateConfig, TemplateDatabase};
+use nalgebra::Vector3;
 use std::sync::{Arc, OnceLock};
 
 /// The default template database, built once per test run.
@@ -84,15 +85,14 @@ fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {
     mean_joint_error_of(&BodyModel::default(), a, pose)
 }
 
+/// The mean distance between two sets of joints.
+pub(crate) fn mean_joint_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
+    a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len() as f64
+}
+
 /// The mean distance of `a`'s joints from those of `model` at `pose`.
 pub(crate) fn mean_joint_error_of(model: &BodyModel, a: &PoseResult, pose: &Pose) -> f64 {
-    let truth = model.joints(pose);
-    a.joints
-        .iter()
-        .zip(&truth)
-        .map(|(p, q)| (p - q).norm())
-        .sum::<f64>()
-        / truth.len() as f64
+    mean_joint_distance(&a.joints, &model.joints(pose))
 }
 
 pub(crate) fn estimator(camera: &Camera, config: PipelineConfig) -> Estimator {
