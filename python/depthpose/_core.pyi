@@ -1901,7 +1901,9 @@ class PipelineConfig:
         Tracking: the template search also runs every this many frames, not only when
         the track is lost (0 = only when lost). Default 0.
     recheck_hypotheses, lost_hypotheses
-        Template hypotheses of a re-check and of a lost frame. Default 4 and 8.
+        Template hypotheses of a re-check and of a lost frame. Default 4 and 8. A lost
+        frame whose best fit still explains the depth worse than ``lost_discrepancy``
+        (a cut, say) is searched again with ``hypotheses``.
     switch_margin
         A re-check switches when it explains the depth better by this share; from
         scratch the wide search's and the size end's fits replace the first by the

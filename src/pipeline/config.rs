@@ -61,7 +61,8 @@ pub struct PipelineConfig {
     /// ... with this many template hypotheses besides the tracked pose and its
     /// swapped-limbs pose.
     pub recheck_hypotheses: usize,
-    /// Tracking: template hypotheses refined when the track is lost.
+    /// Tracking: template hypotheses refined when the track is lost; when the best fit
+    /// still explains the depth badly, the search runs again with `hypotheses`.
     pub lost_hypotheses: usize,
     /// "Clearly better": a lower discrepancy by at least this share. From scratch, the
     /// wide search's and the size end's fits replace the first by the same margin, and

@@ -1,20 +1,22 @@
 //! The pose of a frame with nothing known: the template search, then the limb poses
-//! ([`super::limbs`]), the turns of a badly explained fit ([`super::turns`]), then the
-//! body's size ([`super::size`]). `Estimator::estimate` and a track's first frame both
-//! run it.
+//! ([`super::limbs`]), the turns ([`super::turns`]: the half turn always, every eighth
+//! of a turn for a badly explained fit), then the body's size ([`super::size`]).
+//! `Estimator::estimate` and a track's first frame both run it.
 //!
 //! A result that explains the depth badly ([`Estimator::explains_badly`]: what the
-//! tracker calls lost) may be a body the first views misread: upside down but about
-//! vertical, doubled up, or in a pose no template holds upright but one holds rolled.
-//! The search then also runs on the frame seen at every eighth of a turn, and its fit
-//! replaces the first when it ranks better by `switch_margin`. When the wide search's
-//! fit explains the depth badly too, the body may be one no template resembles
-//! (airborne, tucked, split): the neutral bodies at every orientation
-//! ([`super::neutral`]) are fitted as well and the better-ranked reading competes. When
-//! the result still explains the depth badly, the first search runs again with the body
-//! at the end of the size range toward which its size search leaned
-//! (`Estimator::search_size_end`), for a subject whose size misled it. Frames
-//! explained well pay for none of these.
+//! tracker calls lost) may be a subject whose size misled the search: the first search
+//! runs again with the body at the end of the size range toward which its size search
+//! leaned (`Estimator::search_size_end`), and its fit replaces the first when it ranks
+//! better by `switch_margin`. A result still explained badly may be a body the first
+//! views misread: upside down but about vertical, doubled up, or in a pose no template
+//! holds upright but one holds rolled. The search then also runs on the frame seen at
+//! every eighth of a turn, and its fit replaces the result when it ranks better by
+//! `switch_margin`. When the wide search's fit explains the depth badly too, the body
+//! may be one no template resembles (airborne, tucked, split): the neutral bodies at
+//! every orientation ([`super::neutral`]) are fitted as well and the better-ranked
+//! reading competes. The size end comes first because upright readings are by far the
+//! commonest: they get the size they need before the rolled ones compete with them.
+//! Frames explained well pay for none of these.
 
 use super::estimator::{Estimator, Frame};
 use super::result::Clock;
@@ -39,6 +41,21 @@ impl Estimator {
         let unsized_rank = self.rank(score, &best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
         clock.lap("fit");
+        let keep = 1.0 - self.config().switch_margin;
+        let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
+        if size && self.explains_badly(frame, sized.score) {
+            // Explained badly: the subject's size may be far enough from the model's
+            // that the search, at the model's size, preferred a wrong reading. The ends
+            // of the size range are less likely: `switch_margin`. This runs before the
+            // wide search so that the commonest readings, upright ones, have the size
+            // they need before the rolled ones compete with them.
+            if let Some(other) = self.search_size_end(frame, hypotheses, sized.lean)? {
+                if rank(&other) < rank(&sized) * keep {
+                    sized = other;
+                }
+                clock.lap("sizes");
+            }
+        }
         if self.explains_badly(frame, sized.score) {
             // A body explained this badly may be one the first views misread: the wide
             // search runs too. Its readings are the less likely ones (a body upright in
@@ -56,28 +73,13 @@ impl Estimator {
                     clock.lap("neutral");
                 }
                 let (best, score) = self.repose_limbs(frame, best, score)?;
-                let keep = 1.0 - self.config().switch_margin;
                 if self.rank(score, &best.pose) < unsized_rank * keep {
                     let other = self.fit_size(frame, best, score, size)?;
-                    let sized_rank = self.rank(sized.score, &sized.fit.pose);
-                    if self.rank(other.score, &other.fit.pose) < sized_rank * keep {
+                    if rank(&other) < rank(&sized) * keep {
                         sized = other;
                     }
                 }
                 clock.lap("wide");
-            }
-        }
-        if size && self.explains_badly(frame, sized.score) {
-            // Still explained badly: the subject's size may be far enough from the
-            // model's that the search, at the model's size, preferred a wrong reading.
-            // The ends of the size range are less likely too: `switch_margin` again.
-            if let Some(other) = self.search_size_end(frame, hypotheses, sized.lean)? {
-                let keep = 1.0 - self.config().switch_margin;
-                let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
-                if rank(&other) < rank(&sized) * keep {
-                    sized = other;
-                }
-                clock.lap("sizes");
             }
         }
         Ok(sized)

@@ -4,14 +4,17 @@
 //! their back views, so a body seen obliquely starts an eighth of a turn or more from
 //! the nearest template, and the EM, being local, can settle on a reading turned the
 //! wrong way: the body facing away instead of toward the camera, or its near side read
-//! as its far side. When a fit explains the depth badly ([`Estimator::explains_badly`]),
-//! the fitted body is turned about its own vertical axis by every other eighth of a
-//! turn, each with its limbs as fitted and exchanged, and it is also tried with only its
-//! arms and only its legs exchanged (a raised arm read as the other one); each gets a
-//! short EM, and the refit that ranks best replaces the fit when it ranks better.
+//! as its far side. Front and back are resolved explicitly: every fit is also tried
+//! turned half a turn about its own vertical axis, with its limbs as fitted and
+//! exchanged, since a body and the same body facing the other way draw about mirrored
+//! silhouettes that the search's starts hardly tell apart. When a fit explains the
+//! depth badly ([`Estimator::explains_badly`]), it is turned by every other eighth of a
+//! turn as well, and also tried with only its arms and only its legs exchanged (a
+//! raised arm read as the other one). Each gets a short EM, and the refit that ranks
+//! best replaces the fit when it ranks better.
 
 use super::estimator::{Estimator, Frame};
-use super::hypotheses::{swap_limbs, turned};
+use super::hypotheses::{swap_limbs, turn_around, turned};
 use crate::body::Pose;
 use crate::error::Result;
 use crate::fit::start::limbs_swapped;
@@ -35,9 +38,18 @@ pub fn turned_starts(pose: &Pose) -> Vec<Pose> {
         .collect()
 }
 
+/// `pose` turned half a turn about its own vertical axis ([`turn_around`]), with its
+/// limbs as they are and exchanged: the readings of the body facing the other way.
+/// Both are among [`turned_starts`].
+pub fn half_turns(pose: &Pose) -> [Pose; 2] {
+    let t = turn_around(pose);
+    [t, swap_limbs(&t)]
+}
+
 impl Estimator {
-    /// `fit` (with `score`, its depth discrepancy) or, when it explains the depth badly,
-    /// the best of its turned refits where that ranks better (see the module docs).
+    /// `fit` (with `score`, its depth discrepancy) or the best of its turned refits where
+    /// that ranks better: half a turn always, every eighth of a turn when it explains
+    /// the depth badly (see the module docs).
     /// Returns the fit kept and its discrepancy.
     pub(crate) fn try_turns(
         &self,
@@ -45,10 +57,11 @@ impl Estimator {
         fit: FitResult,
         score: f64,
     ) -> Result<(FitResult, f64)> {
-        if !self.explains_badly(frame, score) {
-            return Ok((fit, score));
-        }
-        let starts = turned_starts(&fit.pose);
+        let starts = if self.explains_badly(frame, score) {
+            turned_starts(&fit.pose)
+        } else {
+            half_turns(&fit.pose).to_vec()
+        };
         let config = self.config().short_refit();
         let fits = self.fits(frame, &config, &starts, None, None)?;
         let (best, best_score, best_rank) = self.best_ranked(frame, fits)?;
@@ -63,11 +76,12 @@ impl Estimator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::{root_rotation, BodyModel};
+    use crate::body::{param, root_rotation, BodyModel};
     use crate::camera::Camera;
-    use crate::pipeline::tests::{estimator, walking};
+    use crate::pipeline::tests::{estimator, mean_joint_distance, walking};
     use crate::pipeline::PipelineConfig;
     use nalgebra::Vector3;
+    use std::f64::consts::PI;
 
     #[test]
     fn turned_starts_are_the_other_eighths_of_a_turn_with_limbs_as_they_are_and_exchanged() {
@@ -76,6 +90,7 @@ mod tests {
         assert_eq!(starts.len(), 17);
         assert_eq!(starts[15], limbs_swapped(&pose, false, true));
         assert_eq!(starts[16], limbs_swapped(&pose, true, false));
+        assert_eq!(starts[7..9], half_turns(&pose));
         let r = root_rotation(&pose);
         // Entry j of (turn k, limbs exchanged) in order is (j / 2, j odd); entry 0, the
         // pose itself, is left out.
@@ -93,21 +108,32 @@ mod tests {
         }
     }
 
-    /// A walker seen obliquely by [`Camera::itop`], its mask, and the short fit from
-    /// `start` on that frame: (pose, fit, its discrepancy, estimator, frame) to `check`.
-    fn short_fit_of_an_oblique_walker(
+    /// A walker seen obliquely.
+    fn oblique_walker() -> Pose {
+        turned(&walking(&BodyModel::default(), 0.9), 0.8)
+    }
+
+    /// `pose` seen by [`Camera::itop`], its mask, and the short fit from `start` on that
+    /// frame (with `full`, the whole EM of the fit settings, its start recentred):
+    /// (pose, fit, its discrepancy, estimator, frame) to `check`.
+    fn fitted_from(
+        pose: Pose,
+        full: bool,
         start: impl Fn(&Pose) -> Pose + Sync,
         check: impl FnOnce(&Pose, FitResult, f64, &Estimator, &mut Frame) + Send,
     ) {
         let model = BodyModel::default();
         let camera = Camera::itop();
-        let pose = turned(&walking(&model, 0.9), 0.8);
         let (depth, labels) = model.render_depth(&pose, &camera);
         let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
         let est = estimator(&camera, PipelineConfig::default());
         crate::pool::on_worker(|| {
             let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
-            let config = est.config().short_refit();
+            let config = if full {
+                est.config().fit
+            } else {
+                est.config().short_refit()
+            };
             let fit = est
                 .fits(&mut frame, &config, &[start(&pose)], None, None)
                 .unwrap()
@@ -118,29 +144,65 @@ mod tests {
         });
     }
 
+    /// The mean joint error of `fit` against `pose`, then [`Estimator::try_turns`] on
+    /// it: (the error before, the error after, the discrepancy after).
+    fn turned_errors(
+        pose: &Pose,
+        fit: FitResult,
+        score: f64,
+        est: &Estimator,
+        frame: &mut Frame,
+    ) -> (f64, f64, f64) {
+        let model = est.model();
+        let error = |p: &Pose| mean_joint_distance(&model.joints(p), &model.joints(pose));
+        let before = error(&fit.pose);
+        let (turned, turned_score) = est.try_turns(frame, fit, score).unwrap();
+        (before, error(&turned.pose), turned_score)
+    }
+
     #[test]
     fn a_fit_turned_the_wrong_way_is_turned_back() {
         // A fit facing five eighths of a turn away with its limbs exchanged: the short
         // EM alone does not turn it back; the turns do.
         let wrong = |p: &Pose| swap_limbs(&turned(p, 5.0 * FRAC_PI_4));
-        short_fit_of_an_oblique_walker(wrong, |pose, fit, score, est, frame| {
-            let model = est.model();
-            let error = |p: &Pose| {
-                let (a, b) = (model.joints(p), model.joints(pose));
-                a.iter().zip(&b).map(|(x, y)| (x - y).norm()).sum::<f64>() / a.len() as f64
-            };
-            assert!(est.explains_badly(frame, score), "discrepancy {score}");
-            assert!(error(&fit.pose) > 0.1, "error {}", error(&fit.pose));
-            let (turned_fit, turned_score) = est.try_turns(frame, fit, score).unwrap();
-            assert!(turned_score < score, "{turned_score} against {score}");
-            let e = error(&turned_fit.pose);
-            assert!(e < 0.04, "mean joint error {e}");
-        });
+        fitted_from(
+            oblique_walker(),
+            false,
+            wrong,
+            |pose, fit, score, est, frame| {
+                assert!(est.explains_badly(frame, score), "discrepancy {score}");
+                let (before, after, turned_score) = turned_errors(pose, fit, score, est, frame);
+                assert!(before > 0.1, "error {before}");
+                assert!(turned_score < score, "{turned_score} against {score}");
+                assert!(after < 0.04, "mean joint error {after}");
+            },
+        );
+    }
+
+    #[test]
+    fn a_fit_facing_away_that_explains_the_depth_well_is_turned_around() {
+        // A walker facing the camera, an elbow bent. The fit starts facing away with its
+        // limbs exchanged, so that each limb lies on its own side of the image, and its
+        // EM makes it explain the depth well: only the half turn finds the body.
+        for elbow in [0.6, 0.8] {
+            let mut pose = walking(&BodyModel::default(), 0.9);
+            pose[param::R_ELBOW] = elbow;
+            let away = |p: &Pose| swap_limbs(&turned(p, PI));
+            fitted_from(pose, true, away, |pose, fit, score, est, frame| {
+                assert!(!est.explains_badly(frame, score), "discrepancy {score}");
+                let (before, after, turned_score) = turned_errors(pose, fit, score, est, frame);
+                assert!(before > 0.25, "error {before}");
+                assert!(turned_score < score, "{turned_score} against {score}");
+                assert!(after < 0.06, "elbow {elbow}: mean joint error {after}");
+            });
+        }
     }
 
     #[test]
     fn a_fit_that_explains_the_depth_well_is_kept_as_it_is() {
-        short_fit_of_an_oblique_walker(
+        fitted_from(
+            oblique_walker(),
+            false,
             |p| *p,
             |_, fit, score, est, frame| {
                 let kept = fit.pose;
