@@ -230,7 +230,7 @@ mod tests {
         let mut depth = room_posed(&model, &truth);
         let empty = room(&camera);
         let (_, labels) = model.render_depth(&truth, &camera);
-        let arm = [seg::R_UPPER_ARM, seg::R_FOREARM, seg::R_HAND].map(|s| s as i16);
+        let arm = LIMB_SEGMENTS[0].map(|s| s as i16);
         for ((d, &e), l) in depth.iter_mut().zip(&empty).zip(&labels) {
             if arm.contains(l) {
                 *d = e;

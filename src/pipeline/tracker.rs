@@ -562,7 +562,7 @@ mod tests {
         cut[param_root_yaw()] = 2.4;
         cut[param::R_SHOULDER] = 2.9;
         cut[param::L_HIP] = 1.4;
-        cut[param::L_HIP + 2] = 1.6;
+        cut[param::L_KNEE] = 1.6;
         let run = |hypotheses: usize| {
             let config = PipelineConfig {
                 calibration_frames: 0,
