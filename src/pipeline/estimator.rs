@@ -4,7 +4,7 @@
 
 use super::confidence::joint_confidence;
 use super::config::PipelineConfig;
-use super::hypotheses::{rest_pose_penalty, template_starts};
+use super::hypotheses::{refined_hypotheses, rest_pose_penalty, template_starts};
 use super::orientation::{
     every_roll, long_axis_tilt, rotate_about_optical_axis, rotated_view, search_rotations,
 };
@@ -317,12 +317,12 @@ impl Estimator {
 
     /// Start poses from the template search (see [`template_starts`]) on the frame seen
     /// rolled by each of `rotations` (radians; 0 is the frame as it is), the candidates
-    /// rolled back.
+    /// rolled back, each with the index of its view in `rotations`.
     pub(crate) fn template_hypotheses(
         &self,
         frame: &Frame,
         rotations: &[f64],
-    ) -> Result<Vec<Pose>> {
+    ) -> Result<Vec<(Pose, usize)>> {
         let camera = &self.resolution.working;
         let config = MatchConfig {
             top_k: self.config.candidates,
@@ -360,24 +360,26 @@ impl Estimator {
                     .collect())
             })
             .collect();
-        let mut candidates = Vec::new();
-        for found in per_view {
-            candidates.extend(found?);
+        let (mut candidates, mut view_of) = (Vec::new(), Vec::new());
+        for (view, found) in per_view.into_iter().enumerate() {
+            let found = found?;
+            view_of.extend(std::iter::repeat_n(view, found.len()));
+            candidates.extend(found);
         }
         if candidates.is_empty() {
             return Err(Error::NoBody(
                 "depth: no template matched the foreground".into(),
             ));
         }
-        Ok(template_starts(
-            &self.model,
-            &candidates,
-            self.config.back_views,
-        ))
+        let starts = template_starts(&self.model, &candidates, self.config.back_views);
+        Ok(starts
+            .into_iter()
+            .map(|(pose, candidate)| (pose, view_of[candidate]))
+            .collect())
     }
 
     /// The best fit from the template hypotheses (see [`Self::search_views`]) on the
-    /// first views ([`Self::first_rolls`]).
+    /// first views ([`Self::first_rolls`]), each view's best-ranked hypothesis refined.
     pub(crate) fn search(
         &self,
         frame: &mut Frame,
@@ -386,7 +388,11 @@ impl Estimator {
         clock: Option<&mut Clock>,
     ) -> Result<(FitResult, f64)> {
         let rolls = self.first_rolls(frame);
-        self.search_views(frame, extra, hypotheses, &rolls, clock)
+        let views = Views {
+            rolls: &rolls,
+            distinct: true,
+        };
+        self.search_views(frame, extra, hypotheses, &views, clock)
     }
 
     /// The wide search, for a body the first views misread (upside down, doubled up,
@@ -405,33 +411,46 @@ impl Estimator {
             .into_iter()
             .filter(|r| !first.iter().any(|f| (f - r).abs() < 1e-9))
             .collect();
-        self.search_views(frame, &[], hypotheses, &wide, None)
+        let views = Views {
+            rolls: &wide,
+            distinct: false,
+        };
+        self.search_views(frame, &[], hypotheses, &views, None)
             .map(Some)
     }
 
-    /// The best fit from the template hypotheses on the views rolled by `rotations`
-    /// (and `extra` start poses, always refined): the best `hypotheses` by their depth
-    /// discrepancy refined briefly by EM, the `finals` explaining the depth best refined
-    /// fully (their EM continued), the best of all kept. Returns the fit and its
-    /// discrepancy. The fit has its EM's labels only ([`Self::label_all`] completes it).
+    /// The best fit from the template hypotheses on `views` (and `extra` start poses,
+    /// always refined): the best `hypotheses` by their ranking (depth discrepancy and
+    /// rest-pose penalty; with distinct views, each view's best among them: see
+    /// [`refined_hypotheses`]) refined briefly by EM, the `finals` explaining the depth
+    /// best refined fully (their EM continued), the best of all kept. Returns the fit and
+    /// its discrepancy. The fit has its EM's labels only ([`Self::label_all`] completes
+    /// it).
     pub(crate) fn search_views(
         &self,
         frame: &mut Frame,
         extra: &[Pose],
         hypotheses: usize,
-        rotations: &[f64],
+        views: &Views,
         clock: Option<&mut Clock>,
     ) -> Result<(FitResult, f64)> {
         let cfg = &self.config;
-        let mut starts = self.template_hypotheses(frame, rotations)?;
+        let found = self.template_hypotheses(frame, views.rolls)?;
         if let Some(clock) = clock {
             clock.lap("templates");
         }
+        let mut starts: Vec<Pose> = found.iter().map(|&(pose, _)| pose).collect();
         let n = hypotheses.max(1);
         if n < starts.len() {
             let scores = self.discrepancies(frame, &starts)?;
             let order = stable_order(&self.rankings(&scores, &starts));
-            starts = order[..n].iter().map(|&i| starts[i]).collect();
+            let picked = if views.distinct {
+                let view_of: Vec<usize> = found.iter().map(|&(_, view)| view).collect();
+                refined_hypotheses(&order, &view_of, n)
+            } else {
+                order[..n].to_vec()
+            };
+            starts = picked.iter().map(|&i| starts[i]).collect();
         }
         let mut chosen: Vec<Pose> = extra.iter().chain(&starts).copied().collect();
         // Candidates continued at their own stride need no labels beyond their EM's.
@@ -588,6 +607,17 @@ impl Estimator {
         let score = depth_discrepancy(&rendered, &frame.depth, &frame.mask, DISCREPANCY_CAP);
         (score, labels)
     }
+}
+
+/// The views a search matches the templates on.
+pub(crate) struct Views<'a> {
+    /// Rolls of the frame about the optical axis (radians; 0 is the frame as it is).
+    pub rolls: &'a [f64],
+    /// Whether the views are distinct readings of the body (the first views: as it is,
+    /// upright, upside down), each view's best hypothesis then refined, or a sweep whose
+    /// neighbouring views read the body alike (the wide search), its hypotheses
+    /// competing by rank alone.
+    pub distinct: bool,
 }
 
 /// Indices sorting `values` ascending; equal values keep their order.

@@ -99,11 +99,16 @@ pub fn rest_pose_penalty(pose: &Pose, weight: f64) -> f64 {
 /// pose, the mirror images of both (the search cannot tell a side view's near limbs
 /// from its far ones, nor a view from its mirror image) and, with `back_views`, all
 /// four turned around (a body seen from behind has about the silhouette of one seen
-/// from the front); near-duplicates dropped.
-pub fn template_starts(model: &BodyModel, candidates: &[Candidate], back_views: bool) -> Vec<Pose> {
-    let mut out: Vec<Pose> = Vec::with_capacity(8 * candidates.len());
+/// from the front); near-duplicates dropped. Each start comes with the index of its
+/// candidate.
+pub fn template_starts(
+    model: &BodyModel,
+    candidates: &[Candidate],
+    back_views: bool,
+) -> Vec<(Pose, usize)> {
+    let mut out: Vec<(Pose, usize)> = Vec::with_capacity(8 * candidates.len());
     let mut kept: Vec<[Vector3<f64>; crate::body::NUM_JOINTS]> = Vec::new();
-    for c in candidates {
+    for (k, c) in candidates.iter().enumerate() {
         let p = c.pose;
         let s = swap_limbs(&p);
         let front = [p, s, mirror_view(&p), mirror_view(&s)];
@@ -115,18 +120,53 @@ pub fn template_starts(model: &BodyModel, candidates: &[Candidate], back_views: 
         };
         for q in all.iter().flatten().copied() {
             let j = model.joints(&q);
-            let duplicate = kept.iter().any(|k| {
+            let duplicate = kept.iter().any(|kj| {
                 let mean =
-                    k.iter().zip(&j).map(|(a, b)| (a - b).norm()).sum::<f64>() / j.len() as f64;
+                    kj.iter().zip(&j).map(|(a, b)| (a - b).norm()).sum::<f64>() / j.len() as f64;
                 mean < DUPLICATE_DISTANCE
             });
             if !duplicate {
                 kept.push(j);
-                out.push(q);
+                out.push((q, k));
             }
         }
     }
     out
+}
+
+/// The hypotheses a search refines: the best `n` of `order` (hypothesis indices, the
+/// best-ranked first), except that the best-ranked hypothesis of each view
+/// (`views[i]`: the view hypothesis `i` comes from) is always among them, in place of
+/// the worst-ranked others. The views of a search are distinct readings of the body (as
+/// it is, its long axis upright, upside down); ranked together, the readings of one
+/// view can fill the whole budget and crowd out a view whose template poses match less
+/// well before the fit but whose fit explains the depth best (a raised arm tilting an
+/// upright body's silhouette). When there are more views than `n`, the best-ranked
+/// views' hypotheses are kept. Returned in the order of `order`.
+pub fn refined_hypotheses(order: &[usize], views: &[usize], n: usize) -> Vec<usize> {
+    let n = n.min(order.len());
+    let n_views = order.iter().map(|&i| views[i] + 1).max().unwrap_or(0);
+    let mut seen = vec![false; n_views];
+    let mut view_best = vec![false; order.len()];
+    let mut reserved = 0;
+    for (rank, &i) in order.iter().enumerate() {
+        if !seen[views[i]] && reserved < n {
+            seen[views[i]] = true;
+            view_best[rank] = true;
+            reserved += 1;
+        }
+    }
+    let mut others = n - reserved;
+    let mut picked = Vec::with_capacity(n);
+    for (rank, &i) in order.iter().enumerate() {
+        if view_best[rank] {
+            picked.push(i);
+        } else if others > 0 {
+            others -= 1;
+            picked.push(i);
+        }
+    }
+    picked
 }
 
 #[cfg(test)]
@@ -196,6 +236,63 @@ mod tests {
         for (a, b) in j.iter().zip(&jt) {
             let (ba, bb) = (r.inverse() * (a - hip), r.inverse() * (b - hip));
             assert!((bb - Vector3::new(-ba.x, ba.y, -ba.z)).norm() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn each_views_best_hypothesis_is_refined_in_place_of_the_worst_others() {
+        // Ranked 5, 3, 0, 4, 1, 2: view 0 holds the four best, view 1 ranks fifth.
+        let order = [5, 3, 0, 4, 1, 2];
+        let views = [0, 1, 1, 0, 0, 0];
+        assert_eq!(refined_hypotheses(&order, &views, 3), vec![5, 3, 1]);
+        // A budget holding it anyway changes nothing.
+        assert_eq!(refined_hypotheses(&order, &views, 5), vec![5, 3, 0, 4, 1]);
+        // One view: the best n.
+        assert_eq!(refined_hypotheses(&order, &[0; 6], 2), vec![5, 3]);
+        // More views than the budget: the best-ranked views' best.
+        let spread = [2, 0, 3, 1, 4, 5];
+        assert_eq!(refined_hypotheses(&order, &spread, 2), vec![5, 3]);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn refined_hypotheses_keep_each_views_best_then_the_best_ranked(
+            views in proptest::collection::vec(0usize..4, 1..30),
+            seed in 0u64..1000,
+            n in 1usize..12,
+        ) {
+            // A ranking: the indices shuffled by the seed.
+            let mut order: Vec<usize> = (0..views.len()).collect();
+            order.sort_by_key(|&i| (i as u64 * 2654435761 + seed * 97) % 1009);
+            let picked = refined_hypotheses(&order, &views, n);
+            let n = n.min(order.len());
+            proptest::prop_assert_eq!(picked.len(), n);
+            // In the order of the ranking, each at most once.
+            let position = |i: usize| order.iter().position(|&o| o == i).unwrap();
+            proptest::prop_assert!(picked.windows(2).all(|w| position(w[0]) < position(w[1])));
+            // Each view's best is in, when the budget holds every view.
+            let mut bests: Vec<usize> = Vec::new();
+            for &i in &order {
+                if !bests.iter().any(|&b| views[b] == views[i]) {
+                    bests.push(i);
+                }
+            }
+            if bests.len() <= n {
+                for b in &bests {
+                    proptest::prop_assert!(picked.contains(b));
+                }
+            }
+            // The others are the best-ranked of the rest: none left out ranks above one in.
+            let others: Vec<usize> = picked.iter().copied().filter(|i| !bests.contains(i)).collect();
+            let worst_in = others.iter().map(|&i| position(i)).max();
+            let best_out = order
+                .iter()
+                .filter(|i| !picked.contains(i) && !bests.contains(i))
+                .map(|&i| position(i))
+                .min();
+            if let (Some(w), Some(b)) = (worst_in, best_out) {
+                proptest::prop_assert!(w < b);
+            }
         }
     }
 
