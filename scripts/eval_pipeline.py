@@ -16,6 +16,7 @@ template search, and re-initialised / switched frames separately) and the peak r
     python scripts/eval_pipeline.py --json-out figures.json
     python scripts/eval_pipeline.py --mode track --height 1.60 --calibrate on
     python scripts/eval_pipeline.py --mode track --no-background --learn-background
+    python scripts/eval_pipeline.py --mirror              # the corpus in a mirror
 
 The person's mask of each frame is scored against the sequence's ground-truth ``mask``
 (intersection over union, a failed frame counting 0), over every frame and from frame
@@ -39,6 +40,7 @@ import resource
 import sys
 import time
 from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -52,7 +54,17 @@ def _peak_rss_mib() -> float:
     return rss / (1024 * 1024) if sys.platform == "darwin" else rss / 1024
 
 
-def _load(path: Path, frames: int | None, start: int):
+class Scene(NamedTuple):
+    """A sequence's frames with what scores them."""
+
+    camera: Any
+    background: np.ndarray | None
+    depth: np.ndarray
+    gt: np.ndarray
+    masks: np.ndarray | None
+
+
+def _load(path: Path, frames: int | None, start: int, mirror: bool) -> Scene:
     from depthpose.sequence import open_sequence
 
     seq = open_sequence(path)
@@ -61,7 +73,30 @@ def _load(path: Path, frames: int | None, start: int):
     gt = np.asarray(seq.gt_joints[start:stop], np.float64)
     with np.load(path) as d:
         masks = np.asarray(d["mask"][start:stop], bool) if "mask" in d.files else None
-    return seq, depth, gt, masks
+    scene = Scene(seq.camera, seq.background, depth, gt, masks)
+    return _mirrored(scene) if mirror else scene
+
+
+def _mirrored(scene: Scene) -> Scene:
+    """The scene in a mirror: every image flipped left-right and the joints mirrored to
+    match, left and right exchanged (the subject's mirror image, seen from the mirrored
+    view: views, turns and limb poses the corpus does not hold)."""
+    from depthpose.pipeline import JOINT_NAMES
+
+    cam = scene.camera
+    side = {"R": "L", "L": "R"}
+    other = [
+        JOINT_NAMES.index(side[n[0]] + n[1:]) if n[0] in side and n[1].isupper() else k
+        for k, n in enumerate(JOINT_NAMES)
+    ]
+    gt = scene.gt[:, other].copy()
+    # Pixel column u goes to W − 1 − u: x/z = (u − cx)/fx becomes (W − 1 − u − cx)/fx.
+    gt[..., 0] = (cam.width - 1 - 2 * cam.cx) * gt[..., 2] / cam.fx - gt[..., 0]
+
+    def flip(a: np.ndarray | None) -> np.ndarray | None:
+        return None if a is None else np.ascontiguousarray(a[..., ::-1])
+
+    return Scene(cam, flip(scene.background), flip(scene.depth), gt, flip(scene.masks))
 
 
 def _iou(a: np.ndarray, b: np.ndarray) -> float:
@@ -79,12 +114,13 @@ def _upsampled(depth, camera, background, u: int):
     return depth, camera.scaled(u), background
 
 
-def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, calibrate=None,
-         background=True, masks=None, upsample=1):  # fmt: skip
+def _run(scene: Scene, templates, config, *, track: bool, step: int, model=None,
+         calibrate=None, background=True, upsample=1):  # fmt: skip
     from depthpose.pipeline import estimate_frames
 
     sources: list[str] = []
-    idx = np.arange(0, depth.shape[0], 1 if track else step)
+    masks = scene.masks
+    idx = np.arange(0, scene.depth.shape[0], 1 if track else step)
     # Mask IoU per frame (a failed frame keeps 0) and the segmentation stage's times.
     ious = np.zeros(len(idx))
     seg_ms: list[float] = []
@@ -105,8 +141,8 @@ def _run(depth, seq, templates, config, *, track: bool, step: int, model=None, c
         else:
             sources.append("tracking+search" if kept else res.source)
 
-    bg = seq.background if background else None
-    frames, camera, bg = _upsampled(depth[idx], seq.camera, bg, upsample)
+    bg = scene.background if background else None
+    frames, camera, bg = _upsampled(scene.depth[idx], scene.camera, bg, upsample)
     t0 = time.perf_counter()
     r = estimate_frames(
         frames,
@@ -189,6 +225,12 @@ def main(argv: list[str] | None = None) -> int:
         "background over the frames (without a background frame)",
     )
     ap.add_argument(
+        "--mirror",
+        action="store_true",
+        help="score each sequence mirrored left-right (images flipped, joints mirrored "
+        "with left and right exchanged): views the corpus does not hold",
+    )
+    ap.add_argument(
         "--iou-from", type=int, default=10, help="mask IoU also from this frame on (default 10)"
     )
     args = ap.parse_args(argv)
@@ -233,13 +275,14 @@ def main(argv: list[str] | None = None) -> int:
     summary: dict = {"sequences": {}, "config": settings, "height": args.height,
                      "calibrate": args.calibrate, "upsample": args.upsample}  # fmt: skip
     for f in files:
-        seq, depth, gt, masks = _load(f, args.frames, args.start)
+        scene = _load(f, args.frames, args.start, args.mirror)
+        depth, gt = scene.depth, scene.gt
         row = [f.stem, str(depth.shape[0])]
         summary["sequences"][f.stem] = {}
         for m in modes:
             idx, r, t, wall, ious, seg_ms, learn_ms = _run(
-                depth, seq, templates, config, track=m == "track", step=args.step,
-                model=model, calibrate=calibrate, background=args.background, masks=masks,
+                scene, templates, config, track=m == "track", step=args.step,
+                model=model, calibrate=calibrate, background=args.background,
                 upsample=args.upsample,
             )  # fmt: skip
             times[f"segment_{m}"] += seg_ms
