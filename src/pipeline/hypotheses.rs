@@ -138,8 +138,8 @@ pub fn template_starts(
 /// best-ranked first), except that the best-ranked hypothesis of each view
 /// (`views[i]`: the view hypothesis `i` comes from) is always among them, in place of
 /// the worst-ranked others. The views of a search are distinct readings of the body (as
-/// it is, its long axis upright, upside down); ranked together, the readings of one
-/// view can fill the whole budget and crowd out a view whose template poses match less
+/// it is, its long axis upright, upside down); ranked together, the readings of some
+/// views can fill the whole budget and crowd out a view whose template poses match less
 /// well before the fit but whose fit explains the depth best (a raised arm tilting an
 /// upright body's silhouette). When there are more views than `n`, the best-ranked
 /// views' hypotheses are kept. Returned in the order of `order`.
