@@ -1858,7 +1858,9 @@ class PipelineConfig:
         Template candidates taken from the search from scratch (each also gives its
         left/right-swapped and mirrored-view hypotheses). Default 4.
     hypotheses
-        Hypotheses, ranked by depth discrepancy, refined by brief EM fits. Default 20.
+        Hypotheses, ranked by depth discrepancy, refined by brief EM fits; the best of
+        each view the search looks at first (as it is and, for a tilted silhouette,
+        turned upright head up and head down) is always among them. Default 20.
     back_views
         Each template hypothesis is also tried turned around (seen from behind).
         Default True.

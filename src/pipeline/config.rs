@@ -10,7 +10,9 @@ pub struct PipelineConfig {
     /// Template candidates taken from the search when estimating from scratch; each also
     /// gives its left/right-swapped and mirrored-view hypotheses.
     pub candidates: usize,
-    /// Hypotheses (after ranking all by their depth discrepancy) refined by EM.
+    /// Hypotheses (after ranking all by their depth discrepancy) refined by EM; the
+    /// best-ranked of each of the search's first views is always among them
+    /// ([`super::hypotheses::refined_hypotheses`]).
     pub hypotheses: usize,
     /// Each template hypothesis is also tried turned around (seen from behind).
     pub back_views: bool,
