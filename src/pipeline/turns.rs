@@ -81,7 +81,6 @@ mod tests {
     use crate::pipeline::tests::{estimator, mean_joint_distance, walking};
     use crate::pipeline::PipelineConfig;
     use nalgebra::Vector3;
-    use std::f64::consts::PI;
 
     #[test]
     fn turned_starts_are_the_other_eighths_of_a_turn_with_limbs_as_they_are_and_exchanged() {
@@ -187,7 +186,7 @@ mod tests {
         for elbow in [0.6, 0.8] {
             let mut pose = walking(&BodyModel::default(), 0.9);
             pose[param::R_ELBOW] = elbow;
-            let away = |p: &Pose| swap_limbs(&turned(p, PI));
+            let away = |p: &Pose| swap_limbs(&turn_around(p));
             fitted_from(pose, true, away, |pose, fit, score, est, frame| {
                 assert!(!est.explains_badly(frame, score), "discrepancy {score}");
                 let (before, after, turned_score) = turned_errors(pose, fit, score, est, frame);
