@@ -325,7 +325,11 @@ def foreground_mask(
     (tolerance ``bg_tolerance + bg_tolerance_quadratic·z²`` metres, following the sensor's
     quantisation), grouped into depth-continuous components (neighbours within
     ``max_step``); the nearest component with at least ``large_share`` of the largest
-    one's pixels is the body, and large pieces next to it are kept too.
+    one's pixels is the body. Large pieces next to it are kept too, and every piece
+    that meets it across a dropout seam of up to 3 pixels with a depth step under
+    0.5 m (a side view's far leg behind the near one, the small pieces noise breaks
+    a thin limb into). Dropouts the silhouette surrounds or that bite into its edge
+    join the mask.
 
     Without it, the person is found automatically (:func:`segment_person`): the floor and
     walls are removed and the most person-like object in ``[min_depth, max_depth]`` is

@@ -5,7 +5,9 @@
 //! the sensor's quantisation step. Without one, pixels within a depth range are grouped.
 //! Either way the candidates are split into depth-continuous connected components and
 //! the nearest large one is kept as the body, together with nearby large pieces of it
-//! (a hand cut off by a shadow). Speckles vanish; holes inside the body stay holes.
+//! (a hand cut off by a shadow) and, with a background frame, the large pieces that
+//! meet it across a dropout seam (a side view's far leg behind the near one). Speckles
+//! vanish; holes inside the body stay holes.
 
 use super::DepthView;
 use crate::error::{ensure, Error, Result};
@@ -32,6 +34,12 @@ pub struct ForegroundConfig {
     /// Other large pieces are kept when their median depth is within this of the body's
     /// and their bounding box touches the body's (grown by 10%).
     pub attach_depth: f32,
+    /// With a background frame, pieces that meet the body across a dropout seam are
+    /// kept from this many pixels. 0 keeps every one: a depth sensor's dropouts break a
+    /// thin far limb into small pieces. A stereo rig's mismatches leave small islands
+    /// beside the body (on the floor around the feet), so its segmentation keeps only
+    /// pieces of `min_component` pixels.
+    pub min_joined_piece: usize,
 }
 
 impl Default for ForegroundConfig {
@@ -45,6 +53,7 @@ impl Default for ForegroundConfig {
             min_component: 40,
             large_share: 0.3,
             attach_depth: 0.5,
+            min_joined_piece: 0,
         }
     }
 }
@@ -126,7 +135,16 @@ pub fn foreground_mask(
         }));
     }
     let components = Components::label(depth, &candidate, config.max_step, config.min_component);
-    let keep = components.select_body(config);
+    // With a background frame every candidate lies in front of the empty scene, so a
+    // piece that meets the body across a sensor's dropout seam with a small depth step
+    // (a side view's far leg behind the near one) is part of it, however far its median
+    // lies behind the body's. Without one, the seam may separate the body from a wall.
+    let groups = background.is_some().then(|| {
+        components
+            .bridge_gaps(depth, MAX_GAP, config.attach_depth)
+            .0
+    });
+    let keep = components.select_body(config, groups.as_deref());
     if keep.is_empty() {
         return Err(Error::NoBody(format!(
             "depth: no foreground object of at least {} pixels",
@@ -144,11 +162,25 @@ pub fn foreground_mask(
     for &i in &components.pixels {
         mask[i as usize] = keep_flag[components.label[i as usize] as usize];
     }
+    fill_silhouette(depth, &mut mask, bbox);
+    Ok(mask)
+}
+
+/// Adds to `mask` (whose bounding box is `bbox`) the pixels without a reading that
+/// belong to the silhouette: the dropouts the body surrounds ([`fill_dropouts`]), then
+/// those biting into its edge ([`fill_majority`]).
+pub(crate) fn fill_silhouette(depth: &DepthView, mask: &mut [bool], bbox: [usize; 4]) {
     let mut added = Vec::new();
     for _ in 0..DROPOUT_FILL_PASSES {
-        fill_dropouts(depth, &mut mask, bbox, &mut added);
+        fill_dropouts(depth, mask, bbox, &mut added);
     }
-    Ok(mask)
+    let mut bbox = bbox;
+    for _ in 0..MAJORITY_FILL_PASSES {
+        match fill_majority(depth, mask, bbox, &mut added) {
+            Some(grown) => bbox = grown,
+            None => break,
+        }
+    }
 }
 
 /// Whether depth `z` lies clearly in front of the background depth `b` (a reading):
@@ -160,6 +192,10 @@ pub(crate) fn in_front_of_background(z: f32, b: f32, config: &ForegroundConfig) 
 
 /// Passes of [`fill_dropouts`]: enough for the 1–2 pixel dropouts of depth sensors.
 pub(crate) const DROPOUT_FILL_PASSES: usize = 2;
+
+/// Pixels without a reading that may separate two parts of one object (dropouts along
+/// depth edges are 1–2 pixels wide, a projector's shadow a few more).
+pub(crate) const MAX_GAP: usize = 3;
 
 /// Adds to the mask the pixels *without a reading* that the body surrounds: both
 /// neighbours along a row or a column, or three of the four 4-neighbours, in the mask.
@@ -193,6 +229,61 @@ pub(crate) fn fill_dropouts(
     for &i in add.iter() {
         mask[i] = true;
     }
+}
+
+/// Passes of [`fill_majority`]: the ragged edge of a noisy sensor's silhouette is a few
+/// pixels deep.
+pub(crate) const MAJORITY_FILL_PASSES: usize = 3;
+
+/// Adds to the mask the pixels without a reading of which at least 5 of the 8
+/// neighbours are in it: dropouts that bite into the silhouette's edge (a smooth edge
+/// gives an outside pixel at most 3 neighbours inside, a projector's shadow band along
+/// it too). Only pixels within one pixel of `bbox` (row0, col0, row1, col1; the mask's
+/// bounding box) can qualify. Returns the bounding box of the mask after the pass, or
+/// None when no pixel was added. `add` is scratch.
+pub(crate) fn fill_majority(
+    depth: &DepthView,
+    mask: &mut [bool],
+    bbox: [usize; 4],
+    add: &mut Vec<usize>,
+) -> Option<[usize; 4]> {
+    let (w, h) = (depth.width, depth.height);
+    add.clear();
+    if w < 3 || h < 3 || bbox[0] > bbox[2] {
+        return None;
+    }
+    let rows = bbox[0].max(2) - 1..=(bbox[2] + 1).min(h - 2);
+    let cols = bbox[1].max(2) - 1..=(bbox[3] + 1).min(w - 2);
+    for row in rows {
+        let (up, mid, down) = (
+            &mask[(row - 1) * w..][..w],
+            &mask[row * w..][..w],
+            &mask[(row + 1) * w..][..w],
+        );
+        for col in cols.clone() {
+            let i = row * w + col;
+            if mid[col] || depth.data[i] > 0.0 {
+                continue;
+            }
+            let n = up[col - 1] as u8
+                + up[col] as u8
+                + up[col + 1] as u8
+                + mid[col - 1] as u8
+                + mid[col + 1] as u8
+                + down[col - 1] as u8
+                + down[col] as u8
+                + down[col + 1] as u8;
+            if n >= 5 {
+                add.push(i);
+            }
+        }
+    }
+    let mut grown = bbox;
+    for &i in add.iter() {
+        mask[i] = true;
+        grown = union_box(grown, [i / w, i % w, i / w, i % w]);
+    }
+    (!add.is_empty()).then_some(grown)
 }
 
 /// The smallest box (row0, col0, row1, col1, inclusive) holding boxes `a` and `b`; the
@@ -329,8 +420,70 @@ impl Components {
         }
     }
 
-    /// The body: the nearest component among the large ones, plus large pieces next to it.
-    fn select_body(&self, config: &ForegroundConfig) -> Vec<usize> {
+    /// Groups of components into objects: two components whose pixels are neighbours, or
+    /// face each other across a run of at most `max_gap` pixels without a reading (a sensor
+    /// dropout along a depth edge, a projector shadow), along a row or a column, with depths
+    /// within `max_step`, are one object. (The components join neighbours within a smaller
+    /// step: a body's far leg is a component of its own, and joins the body here.) Returns
+    /// the group of each component, groups numbered from 0, and their count.
+    pub(crate) fn bridge_gaps(
+        &self,
+        depth: &DepthView,
+        max_gap: usize,
+        max_step: f32,
+    ) -> (Vec<usize>, usize) {
+        let (w, h) = (depth.width, depth.height);
+        let n = self.stats.len();
+        let mut uf = UnionFind::default();
+        for _ in 0..n {
+            uf.push();
+        }
+        if max_gap > 0 {
+            let z = depth.data;
+            let label = &self.label;
+            // From each labelled pixel, the first labelled pixel to its right and the first
+            // below, across at most `max_gap` pixels without a reading; a reading of
+            // something else between them (a plane) separates them. Only the candidate
+            // pixels are visited, so a frame of background subtraction costs its person.
+            for &p in &self.pixels {
+                let i = p as usize;
+                let (row, col) = (i / w, i % w);
+                for (step, room) in [(1, w - 1 - col), (w, h - 1 - row)] {
+                    for s in 1..=room.min(max_gap + 1) {
+                        let j = i + s * step;
+                        if label[j] >= 0 {
+                            let (a, b) = (label[i] as usize, label[j] as usize);
+                            if a != b && (z[i] - z[j]).abs() <= max_step {
+                                uf.union(a, b);
+                            }
+                            break;
+                        }
+                        if z[j] > 0.0 {
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+        let mut group = vec![usize::MAX; n];
+        let mut id_of_root = vec![usize::MAX; n];
+        let mut groups = 0;
+        for (k, g) in group.iter_mut().enumerate() {
+            let r = uf.find(k);
+            if id_of_root[r] == usize::MAX {
+                id_of_root[r] = groups;
+                groups += 1;
+            }
+            *g = id_of_root[r];
+        }
+        (group, groups)
+    }
+
+    /// The body: the nearest component among the large ones, plus the large pieces next
+    /// to it (their boxes touch and their medians lie within `attach_depth`) and, with
+    /// `groups` ([`Self::bridge_gaps`]), the pieces in the body's group of at least
+    /// `min_joined_piece` pixels.
+    fn select_body(&self, config: &ForegroundConfig, groups: Option<&[usize]>) -> Vec<usize> {
         let largest = self.stats.iter().map(|s| s.size).max().unwrap_or(0);
         if largest < config.min_component {
             return Vec::new();
@@ -355,14 +508,19 @@ impl Components {
         ];
         let mut keep = vec![body];
         for (k, s) in self.stats.iter().enumerate() {
-            if k == body || s.size < config.min_component {
+            if k == body {
                 continue;
             }
+            let joined =
+                s.size >= config.min_joined_piece && groups.is_some_and(|g| g[k] == g[body]);
             let overlaps = s.bbox[0] <= outer[2]
                 && s.bbox[2] >= outer[0]
                 && s.bbox[1] <= outer[3]
                 && s.bbox[3] >= outer[1];
-            if overlaps && (s.median_depth - b.median_depth).abs() <= config.attach_depth {
+            let near = s.size >= config.min_component
+                && overlaps
+                && (s.median_depth - b.median_depth).abs() <= config.attach_depth;
+            if near || joined {
                 keep.push(k);
             }
         }
@@ -434,11 +592,93 @@ mod tests {
         }
     }
 
+    /// [`Components::bridge_gaps`] by walking every row and every column of the image,
+    /// remembering the last labelled pixel and the pixels without a reading since it.
+    fn walked_groups(
+        comp: &Components,
+        depth: &DepthView,
+        max_gap: usize,
+        max_step: f32,
+    ) -> Vec<usize> {
+        let (w, h) = (depth.width, depth.height);
+        let n = comp.stats.len();
+        let mut uf = UnionFind::default();
+        for _ in 0..n {
+            uf.push();
+        }
+        if max_gap > 0 {
+            let (z, label) = (depth.data, &comp.label);
+            let mut walk = |start: usize, step: usize, len: usize| {
+                let (mut last, mut gap): (Option<usize>, usize) = (None, 0);
+                for k in 0..len {
+                    let i = start + k * step;
+                    if label[i] >= 0 {
+                        if let Some(j) = last {
+                            let (a, b) = (label[j] as usize, label[i] as usize);
+                            if a != b && (z[i] - z[j]).abs() <= max_step {
+                                uf.union(a, b);
+                            }
+                        }
+                        (last, gap) = (Some(i), 0);
+                    } else if z[i] > 0.0 {
+                        last = None;
+                    } else {
+                        gap += 1;
+                        if gap > max_gap {
+                            last = None;
+                        }
+                    }
+                }
+            };
+            for row in 0..h {
+                walk(row * w, 1, w);
+            }
+            for col in 0..w {
+                walk(col, w, h);
+            }
+        }
+        let mut id_of_root = vec![usize::MAX; n];
+        let mut groups = 0;
+        (0..n)
+            .map(|k| {
+                let r = uf.find(k);
+                if id_of_root[r] == usize::MAX {
+                    id_of_root[r] = groups;
+                    groups += 1;
+                }
+                id_of_root[r]
+            })
+            .collect()
+    }
+
     proptest! {
         #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Bridging from the candidate pixels groups the components exactly as walking
+        /// every row and column does.
+        #[test]
+        fn bridging_matches_a_walk_over_every_line(
+            h in 1usize..14,
+            w in 1usize..41,
+            levels in proptest::collection::vec(0u8..6, 14 * 40),
+            max_gap in 0usize..5,
+            max_step in prop_oneof![Just(0.2f32), Just(0.5f32)],
+        ) {
+            // No reading (0 and NaN), three candidate depths, a reading that is not one.
+            let values = [0.0f32, f32::NAN, 1.0, 1.1, 1.6, 3.0];
+            let depth: Vec<f32> = levels[..h * w].iter().map(|&k| values[k as usize]).collect();
+            let view = DepthView::new(&depth, h, w, "depth").unwrap();
+            let candidate: Vec<bool> = depth.iter().map(|&z| z > 0.3 && z < 2.5).collect();
+            let comp = Components::label(&view, &candidate, 0.05, usize::MAX);
+            let (group, count) = comp.bridge_gaps(&view, max_gap, max_step);
+            let want = walked_groups(&comp, &view, max_gap, max_step);
+            prop_assert_eq!(count, want.iter().max().map_or(0, |&g| g + 1));
+            prop_assert_eq!(group, want);
+        }
+
         /// The two-pass labelling finds the flood fill's components with the same
         /// numbering, sizes, boxes and (for large enough ones) medians; the mask fills
-        /// the same dropouts as a scan of the whole image would.
+        /// the same dropouts, inside and biting into the edge, as a scan of the whole
+        /// image would.
         #[test]
         fn components_match_a_flood_fill(
             h in 1usize..14,
@@ -469,7 +709,7 @@ mod tests {
             if let Ok(mask) = foreground_mask(&view, None, &config) {
                 // The same selection on the reference components, then dropouts filled
                 // by scanning every pixel.
-                let keep = want.select_body(&config);
+                let keep = want.select_body(&config, None);
                 let mut full: Vec<bool> = want.label.iter().map(|&l| l >= 0 && keep.contains(&(l as usize))).collect();
                 for _ in 0..DROPOUT_FILL_PASSES {
                     let mut add = Vec::new();
@@ -487,8 +727,86 @@ mod tests {
                         full[i] = true;
                     }
                 }
+                // Then the pixels without a reading with at least 5 of 8 neighbours in.
+                for _ in 0..MAJORITY_FILL_PASSES {
+                    let mut add = Vec::new();
+                    for i in 0..h * w {
+                        let (row, col) = (i / w, i % w);
+                        if row == 0 || col == 0 || row + 1 >= h || col + 1 >= w || full[i] || depth[i] > 0.0 {
+                            continue;
+                        }
+                        let around = [i - w - 1, i - w, i - w + 1, i - 1, i + 1, i + w - 1, i + w, i + w + 1];
+                        if around.iter().filter(|&&j| full[j]).count() >= 5 {
+                            add.push(i);
+                        }
+                    }
+                    for i in add {
+                        full[i] = true;
+                    }
+                }
                 prop_assert_eq!(mask, full);
             }
+        }
+    }
+
+    /// `n` rows × `w` columns of depth from a per-column profile.
+    fn columns(h: usize, profile: &[f32]) -> Vec<f32> {
+        (0..h).flat_map(|_| profile.iter().copied()).collect()
+    }
+
+    #[test]
+    fn gaps_without_readings_join_objects_and_readings_separate_them() {
+        let groups = |profile: &[f32]| {
+            let depth = columns(4, profile);
+            let view = DepthView::new(&depth, 4, profile.len(), "depth").unwrap();
+            let candidate: Vec<bool> = depth.iter().map(|&z| z > 0.0 && z < 4.0).collect();
+            let comp = Components::label(&view, &candidate, 0.05, usize::MAX);
+            let (group, n) = comp.bridge_gaps(&view, 3, 0.5);
+            (comp.stats.len(), n, group)
+        };
+        // Two parts 0.2 m apart in depth, across two pixels without a reading: one object.
+        assert_eq!(groups(&[2.0, 2.0, 0.0, 0.0, 2.2, 2.2]).1, 1);
+        // Directly adjacent with a step the components do not join (0.3 m): one object.
+        assert_eq!(groups(&[2.0, 2.0, 2.3, 2.3]).1, 1);
+        // Four pixels without a reading are too wide a gap.
+        assert_eq!(groups(&[2.0, 0.0, 0.0, 0.0, 0.0, 2.0]).1, 2);
+        // A reading of something else between them (4.5 m, not a candidate) separates.
+        assert_eq!(groups(&[2.0, 2.0, 4.5, 2.0, 2.0]).1, 2);
+        // Too far apart in depth (0.8 m).
+        let (components, n, _) = groups(&[2.0, 0.0, 2.8]);
+        assert_eq!((components, n), (2, 2));
+    }
+
+    #[test]
+    fn the_majority_fill_closes_bites_but_not_a_shadow_band() {
+        let (h, w) = (12, 12);
+        // A body block (rows 2..10, cols 3..9) with dropouts in it and a notch at its right
+        // edge,
+        // and a one-pixel band without readings along its left edge (a shadow).
+        let mut depth = vec![4.0f32; h * w];
+        let mut mask = vec![false; h * w];
+        for r in 2..10 {
+            for c in 3..9 {
+                depth[r * w + c] = 2.0;
+                mask[r * w + c] = true;
+            }
+            depth[r * w + 2] = 0.0;
+        }
+        for (r, c) in [(5, 8), (7, 6), (7, 7)] {
+            depth[r * w + c] = 0.0;
+            mask[r * w + c] = false;
+        }
+        let view = DepthView::new(&depth, h, w, "depth").unwrap();
+        let mut add = Vec::new();
+        let mut bbox = Some([2, 3, 9, 8]);
+        while let Some(b) = bbox {
+            bbox = fill_majority(&view, &mut mask, b, &mut add);
+        }
+        for (r, c) in [(5, 8), (7, 6), (7, 7)] {
+            assert!(mask[r * w + c], "bite pixel ({r}, {c}) filled");
+        }
+        for r in 0..h {
+            assert!(!mask[r * w + 2], "shadow pixel ({r}, 2) left out");
         }
     }
 
@@ -522,6 +840,41 @@ mod tests {
         assert!(m[30 * w + 40], "dropout filled");
         assert!(!m[21 * w + 36], "hole kept");
         assert!(!m[2 * w + 2], "speckle dropped");
+    }
+
+    #[test]
+    fn with_a_background_a_far_leg_across_a_dropout_seam_is_kept_and_an_object_behind_is_not() {
+        // A side view: the body (3.0 m) and, behind a one-pixel dropout seam, its far leg
+        // going back from 3.4 m to 3.78 m (median 0.59 m behind the body's: beyond
+        // `attach_depth`), with its foot (12 pixels, below `min_component`) cut off by a
+        // row of dropouts.
+        let (h, w) = (60, 80);
+        let bg = img(h, w, |_, _| 5.0);
+        let scene = |seam: f32| {
+            img(h, w, |r, c| match (r, c) {
+                (10..50, 30..45) => 3.0,
+                (30..50, 45) => seam,
+                (30..50, 46..50) => 3.4 + 0.02 * (r - 30) as f32,
+                (50, 46..50) => 0.0,
+                (51..54, 46..50) => 3.8,
+                _ => 5.0,
+            })
+        };
+        let b = DepthView::new(&bg, h, w, "background").unwrap();
+        let config = ForegroundConfig::default();
+        let depth = scene(0.0);
+        let d = DepthView::new(&depth, h, w, "depth").unwrap();
+        let m = foreground_mask(&d, Some(&b), &config).unwrap();
+        assert!(m[20 * w + 35], "the body");
+        assert!(m[40 * w + 47], "the far leg");
+        assert!(m[52 * w + 47], "its foot");
+        assert!(m[40 * w + 45], "the seam between them");
+        // The same shapes with the empty scene's reading in the seam: an object standing
+        // behind the person, beside it in the image. It stays out.
+        let depth = scene(5.0);
+        let d = DepthView::new(&depth, h, w, "depth").unwrap();
+        let m = foreground_mask(&d, Some(&b), &config).unwrap();
+        assert!(m[20 * w + 35] && !m[40 * w + 47] && !m[52 * w + 47]);
     }
 
     #[test]

@@ -176,13 +176,19 @@ impl StereoDepth {
     }
 
     /// `base` with the plane and background tolerances widened to this rig's depth
-    /// noise (module docs): the quadratic coefficients become at least δ/(f·B).
+    /// noise (module docs): the quadratic coefficients become at least δ/(f·B). Pieces
+    /// meeting the body across a seam without matches are kept only from
+    /// `min_component` pixels: mismatches leave small islands beside the body.
     pub fn segment_config(&self, base: &SegmentConfig) -> SegmentConfig {
         let quadratic =
             (self.config.disparity_tolerance as f64 / (self.camera.fx * self.rig.baseline)) as f32;
         let mut c = *base;
         c.planes.tolerance_quadratic = c.planes.tolerance_quadratic.max(quadratic);
         c.foreground.bg_tolerance_quadratic = c.foreground.bg_tolerance_quadratic.max(quadratic);
+        c.foreground.min_joined_piece = c
+            .foreground
+            .min_joined_piece
+            .max(c.foreground.min_component);
         c
     }
 
@@ -456,6 +462,27 @@ mod tests {
             }
         }
         (left, right)
+    }
+
+    #[test]
+    fn the_segmentation_follows_the_rigs_noise_and_keeps_only_large_joined_pieces() {
+        // f·B = 100 × 0.1 = 10 px·m: one pixel of disparity tolerance spans 0.1·z² m.
+        let camera = Camera::new(100.0, 100.0, 70.0, 20.0, 140, 40).unwrap();
+        let rig = StereoRig {
+            baseline: 0.1,
+            doffs: 0.0,
+        };
+        let config = StereoDepthConfig {
+            disparity_tolerance: 1.0,
+            ..StereoDepthConfig::default()
+        };
+        let stereo = StereoDepth::new(&camera, rig, config).unwrap();
+        let base = SegmentConfig::default();
+        let c = stereo.segment_config(&base);
+        assert!((c.foreground.bg_tolerance_quadratic - 0.1).abs() < 1e-6);
+        assert!((c.planes.tolerance_quadratic - 0.1).abs() < 1e-6);
+        assert_eq!(base.foreground.min_joined_piece, 0);
+        assert_eq!(c.foreground.min_joined_piece, base.foreground.min_component);
     }
 
     #[test]

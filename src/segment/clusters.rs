@@ -13,7 +13,6 @@
 use super::planes::{Plane, Rays};
 use crate::cloud::foreground::{union_box, Components};
 use crate::cloud::DepthView;
-use crate::union_find::UnionFind;
 use nalgebra::Vector3;
 
 /// What a person looks like, in metres: the bounds of [`Cluster::person_like`].
@@ -105,74 +104,7 @@ pub fn up_direction(planes: &[Plane]) -> Vector3<f64> {
     }
 }
 
-/// Groups of components into objects: two components whose pixels are neighbours, or
-/// face each other across a run of at most `max_gap` pixels without a reading (a sensor
-/// dropout along a depth edge, a projector shadow), along a row or a column, with depths
-/// within `max_step`, are one object. (The components join neighbours within a smaller
-/// step: a body's far leg is a component of its own, and joins the body here.) Returns
-/// the group of each component, groups numbered from 0, and their count.
-pub(crate) fn bridge_gaps(
-    depth: &DepthView,
-    components: &Components,
-    max_gap: usize,
-    max_step: f32,
-) -> (Vec<usize>, usize) {
-    let (w, h) = (depth.width, depth.height);
-    let n = components.stats.len();
-    let mut uf = UnionFind::default();
-    for _ in 0..n {
-        uf.push();
-    }
-    if max_gap > 0 {
-        let z = depth.data;
-        let label = &components.label;
-        // Walks one line of pixels (`start`, then `step` apart, `len` of them).
-        let mut walk = |start: usize, step: usize, len: usize| {
-            let mut last: Option<usize> = None; // the last labelled pixel
-            let mut gap = 0usize; // pixels without a reading since it
-            for k in 0..len {
-                let i = start + k * step;
-                if label[i] >= 0 {
-                    if let Some(j) = last {
-                        let (a, b) = (label[j] as usize, label[i] as usize);
-                        if a != b && (z[i] - z[j]).abs() <= max_step {
-                            uf.union(a, b);
-                        }
-                    }
-                    last = Some(i);
-                    gap = 0;
-                } else if z[i] > 0.0 {
-                    last = None; // a reading of something else (a plane) separates
-                } else {
-                    gap += 1;
-                    if gap > max_gap {
-                        last = None;
-                    }
-                }
-            }
-        };
-        for row in 0..h {
-            walk(row * w, 1, w);
-        }
-        for col in 0..w {
-            walk(col, w, h);
-        }
-    }
-    let mut group = vec![usize::MAX; n];
-    let mut id_of_root = vec![usize::MAX; n];
-    let mut groups = 0;
-    for (k, g) in group.iter_mut().enumerate() {
-        let r = uf.find(k);
-        if id_of_root[r] == usize::MAX {
-            id_of_root[r] = groups;
-            groups += 1;
-        }
-        *g = id_of_root[r];
-    }
-    (group, groups)
-}
-
-/// Measures every group of components (see [`bridge_gaps`]) of at least `min_size`
+/// Measures every group of components (see [`Components::bridge_gaps`]) of at least `min_size`
 /// pixels; the others get no cluster. Returns the clusters and the cluster of each
 /// group (`usize::MAX` for none).
 pub(crate) fn measure(

@@ -20,9 +20,7 @@ pub mod planes;
 mod tests;
 
 use crate::camera::Camera;
-use crate::cloud::foreground::{
-    fill_dropouts, in_front_of_background, Components, DROPOUT_FILL_PASSES,
-};
+use crate::cloud::foreground::{fill_silhouette, in_front_of_background, Components, MAX_GAP};
 use crate::cloud::{foreground_mask, DepthView, ForegroundConfig};
 use crate::error::{ensure, Error, Result};
 pub use background_model::{BackgroundModel, BackgroundModelConfig};
@@ -225,7 +223,7 @@ pub fn segment_person(
     // Medians are taken per group below, not per component.
     let components = Components::label(depth, &candidate, fg.max_step, usize::MAX);
     let up = clusters::up_direction(&planes);
-    let groups = clusters::bridge_gaps(depth, &components, MAX_GAP, fg.attach_depth);
+    let groups = components.bridge_gaps(depth, MAX_GAP, fg.attach_depth);
     let (found, cluster_of_group) = clusters::measure(
         depth,
         &rays,
@@ -254,15 +252,7 @@ pub fn segment_person(
         mask[i as usize] = keep_component[components.label[i as usize] as usize];
     }
     let bbox = clusters::bbox_of(&found, &keep);
-    let mut added = Vec::new();
-    for _ in 0..DROPOUT_FILL_PASSES {
-        fill_dropouts(depth, &mut mask, bbox, &mut added);
-    }
-    for _ in 0..MAJORITY_FILL_PASSES {
-        if !fill_majority(depth, &mut mask, &mut added) {
-            break;
-        }
-    }
+    fill_silhouette(depth, &mut mask, bbox);
     let person = if keep.len() == 1 {
         found[chosen]
     } else {
@@ -284,58 +274,6 @@ pub fn segment_person(
         person,
         others,
     })
-}
-
-/// Pixels without a reading that may separate two parts of one object (dropouts along
-/// depth edges are 1–2 pixels wide, a projector's shadow a few more).
-const MAX_GAP: usize = 3;
-
-/// Passes of [`fill_majority`]: the ragged edge of a noisy sensor's silhouette is a few
-/// pixels deep.
-const MAJORITY_FILL_PASSES: usize = 3;
-
-/// Adds to the mask the pixels without a reading of which at least 5 of the 8
-/// neighbours are in it: dropouts that bite into the silhouette's edge (a smooth edge
-/// gives an outside pixel at most 3 neighbours inside, a projector's shadow band along
-/// it too). Returns whether any pixel was added. `add` is scratch.
-fn fill_majority(depth: &DepthView, mask: &mut [bool], add: &mut Vec<usize>) -> bool {
-    let (w, h) = (depth.width, depth.height);
-    add.clear();
-    if w < 3 || h < 3 {
-        return false;
-    }
-    for row in 1..h - 1 {
-        let (up, mid, down) = (
-            &mask[(row - 1) * w..][..w],
-            &mask[row * w..][..w],
-            &mask[(row + 1) * w..][..w],
-        );
-        // Skip rows without any mask pixel near them.
-        if !(up.contains(&true) || mid.contains(&true) || down.contains(&true)) {
-            continue;
-        }
-        for col in 1..w - 1 {
-            let i = row * w + col;
-            if mid[col] || depth.data[i] > 0.0 {
-                continue;
-            }
-            let n = up[col - 1] as u8
-                + up[col] as u8
-                + up[col + 1] as u8
-                + mid[col - 1] as u8
-                + mid[col + 1] as u8
-                + down[col - 1] as u8
-                + down[col] as u8
-                + down[col + 1] as u8;
-            if n >= 5 {
-                add.push(i);
-            }
-        }
-    }
-    for &i in add.iter() {
-        mask[i] = true;
-    }
-    !add.is_empty()
 }
 
 /// "No person found", saying what was found instead.

@@ -3,7 +3,6 @@
 
 use super::*;
 use crate::body::BodyModel;
-use crate::cloud::foreground::Components;
 use std::sync::Arc;
 
 /// A room seen by the ITOP-like camera: the floor at `floor` metres below the camera
@@ -263,64 +262,6 @@ fn a_camera_of_another_size_is_refused() {
     let view = DepthView::new(&depth, 3, 4, "depth").unwrap();
     let err = segment_person(&view, &camera, None, &SegmentConfig::default(), None);
     assert!(matches!(err, Err(Error::InvalidArgument { .. })));
-}
-
-/// `n` rows × `w` columns of depth from a per-column profile.
-fn columns(h: usize, profile: &[f32]) -> Vec<f32> {
-    (0..h).flat_map(|_| profile.iter().copied()).collect()
-}
-
-#[test]
-fn gaps_without_readings_join_objects_and_readings_separate_them() {
-    let groups = |profile: &[f32]| {
-        let depth = columns(4, profile);
-        let view = DepthView::new(&depth, 4, profile.len(), "depth").unwrap();
-        let candidate: Vec<bool> = depth.iter().map(|&z| z > 0.0 && z < 4.0).collect();
-        let comp = Components::label(&view, &candidate, 0.05, usize::MAX);
-        let (group, n) = clusters::bridge_gaps(&view, &comp, 3, 0.5);
-        (comp.stats.len(), n, group)
-    };
-    // Two parts 0.2 m apart in depth, across two pixels without a reading: one object.
-    assert_eq!(groups(&[2.0, 2.0, 0.0, 0.0, 2.2, 2.2]).1, 1);
-    // Directly adjacent with a step the components do not join (0.3 m): one object.
-    assert_eq!(groups(&[2.0, 2.0, 2.3, 2.3]).1, 1);
-    // Four pixels without a reading are too wide a gap.
-    assert_eq!(groups(&[2.0, 0.0, 0.0, 0.0, 0.0, 2.0]).1, 2);
-    // A reading of something else between them (4.5 m, not a candidate) separates.
-    assert_eq!(groups(&[2.0, 2.0, 4.5, 2.0, 2.0]).1, 2);
-    // Too far apart in depth (0.8 m).
-    let (components, n, _) = groups(&[2.0, 0.0, 2.8]);
-    assert_eq!((components, n), (2, 2));
-}
-
-#[test]
-fn the_majority_fill_closes_bites_but_not_a_shadow_band() {
-    let (h, w) = (12, 12);
-    // A body block (rows 2..10, cols 3..9) with dropouts in it and a notch at its right
-    // edge,
-    // and a one-pixel band without readings along its left edge (a shadow).
-    let mut depth = vec![4.0f32; h * w];
-    let mut mask = vec![false; h * w];
-    for r in 2..10 {
-        for c in 3..9 {
-            depth[r * w + c] = 2.0;
-            mask[r * w + c] = true;
-        }
-        depth[r * w + 2] = 0.0;
-    }
-    for (r, c) in [(5, 8), (7, 6), (7, 7)] {
-        depth[r * w + c] = 0.0;
-        mask[r * w + c] = false;
-    }
-    let view = DepthView::new(&depth, h, w, "depth").unwrap();
-    let mut add = Vec::new();
-    while fill_majority(&view, &mut mask, &mut add) {}
-    for (r, c) in [(5, 8), (7, 6), (7, 7)] {
-        assert!(mask[r * w + c], "bite pixel ({r}, {c}) filled");
-    }
-    for r in 0..h {
-        assert!(!mask[r * w + 2], "shadow pixel ({r}, 2) left out");
-    }
 }
 
 /// The hint of a video whose learned background is `learned`.
