@@ -10,15 +10,19 @@
 //! silhouettes that the search's starts hardly tell apart. When a fit explains the
 //! depth badly ([`Estimator::explains_badly`]), it is turned by every other eighth of a
 //! turn as well, and also tried with only its arms and only its legs exchanged (a
-//! raised arm read as the other one). Each gets a short EM, and the refit that ranks
-//! best replaces the fit when it ranks better.
+//! raised arm read as the other one). Each gets a short EM, also from the start
+//! recentred on the observed points (a turned body shows the camera its other side),
+//! and the refit that ranks best replaces the fit when it ranks better. From scratch the
+//! turns run before the body's size is searched; when the size search changes the
+//! body, they run again with the sized body (`Estimator::turned_at_size`): a subject
+//! far from the model's size may be read the wrong way round at the model's size only.
 
 use super::estimator::{Estimator, Frame};
 use super::hypotheses::{swap_limbs, turn_around, turned};
 use crate::body::Pose;
 use crate::error::Result;
 use crate::fit::start::limbs_swapped;
-use crate::fit::FitResult;
+use crate::fit::{FitConfig, FitResult};
 use std::f64::consts::FRAC_PI_4;
 
 /// `pose` turned about its own vertical axis by every eighth of a turn, each with its
@@ -57,27 +61,43 @@ impl Estimator {
         fit: FitResult,
         score: f64,
     ) -> Result<(FitResult, f64)> {
+        Ok(self
+            .better_turn(frame, &fit.pose, score)?
+            .unwrap_or((fit, score)))
+    }
+
+    /// The best-ranked of the turned refits of `pose` (with `score`, its depth
+    /// discrepancy) and its discrepancy, when it ranks better than `pose`.
+    pub(crate) fn better_turn(
+        &self,
+        frame: &mut Frame,
+        pose: &Pose,
+        score: f64,
+    ) -> Result<Option<(FitResult, f64)>> {
         let starts = if self.explains_badly(frame, score) {
-            turned_starts(&fit.pose)
+            turned_starts(pose)
         } else {
-            half_turns(&fit.pose).to_vec()
+            half_turns(pose).to_vec()
         };
-        let config = self.config().short_refit();
+        // A turned body shows the camera its other side, whose visible surface lies
+        // elsewhere: each start is also tried recentred on the observed points, like
+        // the search's.
+        let config = FitConfig {
+            recentred_start: true,
+            ..self.config().short_refit()
+        };
         let fits = self.fits(frame, &config, &starts, None, None)?;
         let (best, best_score, best_rank) = self.best_ranked(frame, fits)?;
-        if best_rank < self.rank(score, &fit.pose) {
-            Ok((best, best_score))
-        } else {
-            Ok((fit, score))
-        }
+        Ok((best_rank < self.rank(score, pose)).then_some((best, best_score)))
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::{param, root_rotation, BodyModel};
+    use crate::body::{param, root_rotation, BodyModel, NUM_SHAPE_FACTORS};
     use crate::camera::Camera;
+    use crate::pipeline::size::SizedFit;
     use crate::pipeline::tests::{estimator, mean_joint_distance, walking};
     use crate::pipeline::PipelineConfig;
     use nalgebra::Vector3;
@@ -210,5 +230,62 @@ mod tests {
                 assert_eq!(out_score, score);
             },
         );
+    }
+
+    #[test]
+    fn a_sized_fit_facing_away_is_turned_around_with_its_own_body() {
+        // A subject 10 % larger than the model, facing the camera, and its fit facing
+        // away with the limbs exchanged, made with the subject's body as the size
+        // search leaves it. Its half turns are refitted with that body.
+        let mut pose = walking(&BodyModel::default(), 0.9);
+        pose[param::R_ELBOW] = 0.7;
+        let subject = BodyModel::default()
+            .with_shape_factors(&[1.1; NUM_SHAPE_FACTORS])
+            .unwrap();
+        let camera = Camera::itop();
+        let (depth, labels) = subject.render_depth(&pose, &camera);
+        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let est = estimator(&camera, PipelineConfig::default());
+        crate::pool::on_worker(|| {
+            let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
+            let mut sized_est = est.clone();
+            sized_est.set_model(subject.clone());
+            let away = swap_limbs(&turn_around(&pose));
+            let config = est.config().fit;
+            let fit = sized_est
+                .fits(&mut frame, &config, &[away], None, None)
+                .unwrap()
+                .pop()
+                .unwrap();
+            let (score, _) = sized_est.discrepancy(&frame, &fit.pose);
+            let error = |p: &Pose| mean_joint_distance(&subject.joints(p), &subject.joints(&pose));
+            assert!(error(&fit.pose) > 0.25, "error {}", error(&fit.pose));
+            let sized = SizedFit {
+                fit,
+                score,
+                scale: 1.1,
+                lean: 1,
+                model: subject.clone(),
+            };
+            // At the model's own size the turns ran already: kept as it is.
+            let same = est
+                .turned_at_size(
+                    &mut frame,
+                    SizedFit {
+                        scale: 1.0,
+                        ..sized.clone()
+                    },
+                )
+                .unwrap();
+            assert_eq!(same.fit.pose, sized.fit.pose);
+            let out = est.turned_at_size(&mut frame, sized).unwrap();
+            assert!(out.score < score, "{} against {score}", out.score);
+            assert_eq!(out.scale, 1.1);
+            assert!(
+                error(&out.fit.pose) < 0.08,
+                "mean joint error {}",
+                error(&out.fit.pose)
+            );
+        });
     }
 }
