@@ -711,39 +711,33 @@ mod tests {
                 // by scanning every pixel.
                 let keep = want.select_body(&config, None);
                 let mut full: Vec<bool> = want.label.iter().map(|&l| l >= 0 && keep.contains(&(l as usize))).collect();
-                for _ in 0..DROPOUT_FILL_PASSES {
-                    let mut add = Vec::new();
-                    for i in 0..h * w {
-                        let (row, col) = (i / w, i % w);
-                        if row == 0 || col == 0 || row + 1 >= h || col + 1 >= w || full[i] || depth[i] > 0.0 {
-                            continue;
-                        }
-                        let (l, r, u, d) = (full[i - 1], full[i + 1], full[i - w], full[i + w]);
-                        if (l && r) || (u && d) || (l as u8 + r as u8 + u as u8 + d as u8) >= 3 {
-                            add.push(i);
-                        }
-                    }
-                    for i in add {
-                        full[i] = true;
-                    }
-                }
-                // Then the pixels without a reading with at least 5 of 8 neighbours in.
-                for _ in 0..MAJORITY_FILL_PASSES {
-                    let mut add = Vec::new();
-                    for i in 0..h * w {
-                        let (row, col) = (i / w, i % w);
-                        if row == 0 || col == 0 || row + 1 >= h || col + 1 >= w || full[i] || depth[i] > 0.0 {
-                            continue;
-                        }
-                        let around = [i - w - 1, i - w, i - w + 1, i - 1, i + 1, i + w - 1, i + w, i + w + 1];
-                        if around.iter().filter(|&&j| full[j]).count() >= 5 {
-                            add.push(i);
+                // `passes` times, every interior pixel without a reading that `rule`
+                // accepts (given the mask and the pixel) joins the mask.
+                let mut fill = |passes: usize, rule: &dyn Fn(&[bool], usize) -> bool| {
+                    for _ in 0..passes {
+                        let add: Vec<usize> = (0..h * w)
+                            .filter(|&i| {
+                                let (row, col) = (i / w, i % w);
+                                if row == 0 || col == 0 || row + 1 >= h || col + 1 >= w || full[i] || depth[i] > 0.0 {
+                                    return false;
+                                }
+                                rule(&full, i)
+                            })
+                            .collect();
+                        for i in add {
+                            full[i] = true;
                         }
                     }
-                    for i in add {
-                        full[i] = true;
-                    }
-                }
+                };
+                // Surrounded along a row or a column, or by three of the four neighbours.
+                fill(DROPOUT_FILL_PASSES, &|m, i| {
+                    let (l, r, u, d) = (m[i - 1], m[i + 1], m[i - w], m[i + w]);
+                    (l && r) || (u && d) || (l as u8 + r as u8 + u as u8 + d as u8) >= 3
+                });
+                // Then at least 5 of the 8 neighbours in.
+                fill(MAJORITY_FILL_PASSES, &|m, i| {
+                    [i - w - 1, i - w, i - w + 1, i - 1, i + 1, i + w - 1, i + w, i + w + 1].iter().filter(|&&j| m[j]).count() >= 5
+                });
                 prop_assert_eq!(mask, full);
             }
         }
