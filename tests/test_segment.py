@@ -69,7 +69,8 @@ def test_a_background_frame_is_used_when_given():
 def test_with_a_background_frame_a_side_views_far_leg_stays_in_the_mask():
     """At noise level 2 a dropout seam separates the far leg from the body, more than
     0.5 m behind the body's median when it steps back, and breaks it into small pieces:
-    background subtraction keeps them (it dropped them: recall down to 0.89)."""
+    background subtraction keeps them (by the median and size rules alone: recall down
+    to 0.89)."""
     d, _ = _sequence("dm_zombie_walk_left_noise2")
     ious, recalls = [], []
     for depth, truth in zip(d["depth"], d["mask"], strict=True):
