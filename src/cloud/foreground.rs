@@ -210,18 +210,36 @@ pub(crate) fn fill_dropouts(
     add: &mut Vec<usize>,
 ) {
     let (w, h) = (depth.width, depth.height);
-    add.clear();
     let rows = bbox[0].max(1)..(bbox[2] + 1).min(h.saturating_sub(1));
     let cols = bbox[1].max(1)..(bbox[3] + 1).min(w.saturating_sub(1));
+    fill_where(depth, mask, rows, cols, add, |m, i| {
+        let (l, r, u, d) = (m[i - 1], m[i + 1], m[i - w], m[i + w]);
+        (l && r) || (u && d) || l as u8 + r as u8 + u as u8 + d as u8 >= 3
+    });
+}
+
+/// Adds to the mask the pixels without a reading in `rows` × `cols` that `rule` (the
+/// mask, the pixel) accepts, every pixel judged on the mask as it was before: one pass
+/// of a fill. The ranges leave a pixel's 8 neighbours inside the image. `add` is
+/// scratch, left holding the pixels added.
+fn fill_where(
+    depth: &DepthView,
+    mask: &mut [bool],
+    rows: std::ops::Range<usize>,
+    cols: std::ops::Range<usize>,
+    add: &mut Vec<usize>,
+    rule: impl Fn(&[bool], usize) -> bool,
+) {
+    let w = depth.width;
+    add.clear();
     for row in rows {
         for col in cols.clone() {
             let i = row * w + col;
+            // A reading (NaN is none) is never filled.
             if mask[i] || depth.data[i] > 0.0 {
                 continue;
             }
-            let (l, r, u, d) = (mask[i - 1], mask[i + 1], mask[i - w], mask[i + w]);
-            let count = l as u8 + r as u8 + u as u8 + d as u8;
-            if (l && r) || (u && d) || count >= 3 {
+            if rule(mask, i) {
                 add.push(i);
             }
         }
@@ -248,41 +266,26 @@ pub(crate) fn fill_majority(
     add: &mut Vec<usize>,
 ) -> Option<[usize; 4]> {
     let (w, h) = (depth.width, depth.height);
-    add.clear();
     if w < 3 || h < 3 || bbox[0] > bbox[2] {
+        add.clear();
         return None;
     }
-    let rows = bbox[0].max(2) - 1..=(bbox[2] + 1).min(h - 2);
-    let cols = bbox[1].max(2) - 1..=(bbox[3] + 1).min(w - 2);
-    for row in rows {
-        let (up, mid, down) = (
-            &mask[(row - 1) * w..][..w],
-            &mask[row * w..][..w],
-            &mask[(row + 1) * w..][..w],
-        );
-        for col in cols.clone() {
-            let i = row * w + col;
-            if mid[col] || depth.data[i] > 0.0 {
-                continue;
-            }
-            let n = up[col - 1] as u8
-                + up[col] as u8
-                + up[col + 1] as u8
-                + mid[col - 1] as u8
-                + mid[col + 1] as u8
-                + down[col - 1] as u8
-                + down[col] as u8
-                + down[col + 1] as u8;
-            if n >= 5 {
-                add.push(i);
-            }
-        }
-    }
-    let mut grown = bbox;
-    for &i in add.iter() {
-        mask[i] = true;
-        grown = union_box(grown, [i / w, i % w, i / w, i % w]);
-    }
+    let rows = bbox[0].max(2) - 1..(bbox[2] + 2).min(h - 1);
+    let cols = bbox[1].max(2) - 1..(bbox[3] + 2).min(w - 1);
+    fill_where(depth, mask, rows, cols, add, |m, i| {
+        let n = m[i - w - 1] as u8
+            + m[i - w] as u8
+            + m[i - w + 1] as u8
+            + m[i - 1] as u8
+            + m[i + 1] as u8
+            + m[i + w - 1] as u8
+            + m[i + w] as u8
+            + m[i + w + 1] as u8;
+        n >= 5
+    });
+    let grown = add
+        .iter()
+        .fold(bbox, |b, &i| union_box(b, [i / w, i % w, i / w, i % w]));
     (!add.is_empty()).then_some(grown)
 }
 
@@ -433,11 +436,7 @@ impl Components {
         max_step: f32,
     ) -> (Vec<usize>, usize) {
         let (w, h) = (depth.width, depth.height);
-        let n = self.stats.len();
-        let mut uf = UnionFind::default();
-        for _ in 0..n {
-            uf.push();
-        }
+        let mut uf = UnionFind::singletons(self.stats.len());
         if max_gap > 0 {
             let z = depth.data;
             let label = &self.label;
@@ -465,18 +464,7 @@ impl Components {
                 }
             }
         }
-        let mut group = vec![usize::MAX; n];
-        let mut id_of_root = vec![usize::MAX; n];
-        let mut groups = 0;
-        for (k, g) in group.iter_mut().enumerate() {
-            let r = uf.find(k);
-            if id_of_root[r] == usize::MAX {
-                id_of_root[r] = groups;
-                groups += 1;
-            }
-            *g = id_of_root[r];
-        }
-        (group, groups)
+        uf.numbered_sets()
     }
 
     /// The body: the nearest component among the large ones, plus the large pieces next
@@ -601,11 +589,7 @@ mod tests {
         max_step: f32,
     ) -> Vec<usize> {
         let (w, h) = (depth.width, depth.height);
-        let n = comp.stats.len();
-        let mut uf = UnionFind::default();
-        for _ in 0..n {
-            uf.push();
-        }
+        let mut uf = UnionFind::singletons(comp.stats.len());
         if max_gap > 0 {
             let (z, label) = (depth.data, &comp.label);
             let mut walk = |start: usize, step: usize, len: usize| {
@@ -637,18 +621,7 @@ mod tests {
                 walk(col, w, h);
             }
         }
-        let mut id_of_root = vec![usize::MAX; n];
-        let mut groups = 0;
-        (0..n)
-            .map(|k| {
-                let r = uf.find(k);
-                if id_of_root[r] == usize::MAX {
-                    id_of_root[r] = groups;
-                    groups += 1;
-                }
-                id_of_root[r]
-            })
-            .collect()
+        uf.numbered_sets().0
     }
 
     proptest! {

@@ -87,8 +87,9 @@ impl Estimator {
         Ok(sized)
     }
 
-    /// `sized` or, when its body's size differs from the model's and one of its half
-    /// turns refitted with that body ranks better, that refit labelled at every pixel.
+    /// `sized` or, when its body's size differs from the model's and one of its turned
+    /// refits made with that body ranks better ([`Self::better_turn`]), that refit
+    /// labelled at every pixel.
     pub(crate) fn turned_at_size(&self, frame: &mut Frame, sized: SizedFit) -> Result<SizedFit> {
         if sized.scale == 1.0 {
             return Ok(sized); // the turns ran at this size already
