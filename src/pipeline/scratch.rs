@@ -1,7 +1,7 @@
 //! The pose of a frame with nothing known: the template search, then the limb poses
 //! ([`super::limbs`]), the turns ([`super::turns`]: the half turn always, every eighth
-//! of a turn for a badly explained fit), then the body's size ([`super::size`]) and,
-//! when that changed the body, the turns again with the sized body.
+//! of a turn for a badly explained fit), then the body's size ([`super::size`]), whose
+//! search runs the turns again when it changes the body.
 //! `Estimator::estimate` and a track's first frame both run it.
 //!
 //! A result that explains the depth badly ([`Estimator::explains_badly`]: what the
@@ -40,8 +40,7 @@ impl Estimator {
         let (best, score) = self.repose_limbs(frame, best, score)?;
         let (best, score) = self.try_turns(frame, best, score)?;
         let unsized_rank = self.rank(score, &best.pose);
-        let sized = self.fit_size(frame, best, score, size)?;
-        let mut sized = self.turned_at_size(frame, sized)?;
+        let mut sized = self.fit_size(frame, best, score, size)?;
         clock.lap("fit");
         let keep = 1.0 - self.config().switch_margin;
         let rank = |s: &SizedFit| self.rank(s.score, &s.fit.pose);
@@ -85,25 +84,5 @@ impl Estimator {
             }
         }
         Ok(sized)
-    }
-
-    /// `sized` or, when its body's size differs from the model's and one of its turned
-    /// refits made with that body ranks better ([`Self::better_turn`]), that refit
-    /// labelled at every pixel.
-    pub(crate) fn turned_at_size(&self, frame: &mut Frame, sized: SizedFit) -> Result<SizedFit> {
-        if sized.scale == 1.0 {
-            return Ok(sized); // the turns ran at this size already
-        }
-        let mut at_size = self.clone();
-        at_size.set_model(sized.model.clone());
-        let Some((fit, score)) = at_size.better_turn(frame, &sized.fit.pose, sized.score)? else {
-            return Ok(sized);
-        };
-        let fit = self.label_all(frame, fit, &sized.model)?;
-        Ok(SizedFit {
-            fit,
-            score,
-            ..sized
-        })
     }
 }

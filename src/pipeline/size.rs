@@ -141,6 +141,8 @@ impl Estimator {
                     .collect();
             }
         }
+        // The turns ran with the body at `from`: they run again with the body sized.
+        let mut best = self.turned_at_size(frame, best, 1.0 + from as f64 * step)?;
         best.fit = self.label_all(frame, best.fit, &best.model)?;
         best.lean = lean;
         Ok(best)

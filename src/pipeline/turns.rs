@@ -16,9 +16,12 @@
 //! turns run before the body's size is searched; when the size search changes the
 //! body, they run again with the sized body (`Estimator::turned_at_size`): a subject
 //! far from the model's size may be read the wrong way round at the model's size only.
+//! Every size search does so: the first search's, and those of the searches that run
+//! when it explains the depth badly.
 
 use super::estimator::{Estimator, Frame};
 use super::hypotheses::{swap_limbs, turn_around, turned};
+use super::size::SizedFit;
 use crate::body::Pose;
 use crate::error::Result;
 use crate::fit::start::limbs_swapped;
@@ -66,6 +69,32 @@ impl Estimator {
             .unwrap_or((fit, score)))
     }
 
+    /// `sized` or, when its body's size differs from `turned` (the size whose turns ran
+    /// already) and one of its turned refits made with that body ranks better
+    /// ([`Self::better_turn`]), that refit.
+    pub(crate) fn turned_at_size(
+        &self,
+        frame: &mut Frame,
+        sized: SizedFit,
+        turned: f64,
+    ) -> Result<SizedFit> {
+        if sized.scale == turned {
+            return Ok(sized);
+        }
+        let mut at_size = self.clone();
+        at_size.set_model(sized.model.clone());
+        Ok(
+            match at_size.better_turn(frame, &sized.fit.pose, sized.score)? {
+                Some((fit, score)) => SizedFit {
+                    fit,
+                    score,
+                    ..sized
+                },
+                None => sized,
+            },
+        )
+    }
+
     /// The best-ranked of the turned refits of `pose` (with `score`, its depth
     /// discrepancy) and its discrepancy, when it ranks better than `pose`.
     pub(crate) fn better_turn(
@@ -97,7 +126,6 @@ mod tests {
     use super::*;
     use crate::body::{param, root_rotation, BodyModel, NUM_SHAPE_FACTORS};
     use crate::camera::Camera;
-    use crate::pipeline::size::SizedFit;
     use crate::pipeline::tests::{estimator, mean_joint_distance, walking};
     use crate::pipeline::PipelineConfig;
     use nalgebra::Vector3;
@@ -267,18 +295,10 @@ mod tests {
                 lean: 1,
                 model: subject.clone(),
             };
-            // At the model's own size the turns ran already: kept as it is.
-            let same = est
-                .turned_at_size(
-                    &mut frame,
-                    SizedFit {
-                        scale: 1.0,
-                        ..sized.clone()
-                    },
-                )
-                .unwrap();
+            // At the size whose turns ran already: kept as it is.
+            let same = est.turned_at_size(&mut frame, sized.clone(), 1.1).unwrap();
             assert_eq!(same.fit.pose, sized.fit.pose);
-            let out = est.turned_at_size(&mut frame, sized).unwrap();
+            let out = est.turned_at_size(&mut frame, sized, 1.0).unwrap();
             assert!(out.score < score, "{} against {score}", out.score);
             assert_eq!(out.scale, 1.1);
             assert!(
