@@ -138,6 +138,29 @@ def test_all_zero_depth_has_no_body():
         dp.foreground_mask(np.full((24, 32), np.nan, np.float32))
 
 
+def test_a_piece_across_a_dropout_seam_joins_by_its_step_and_size():
+    """A body (40×15 pixels at 2 m) and a 12-pixel piece 0.3 m behind it, beyond a
+    one-pixel dropout seam, in front of a wall at 4 m."""
+    depth = np.full((60, 80), 4.0, np.float32)
+    depth[10:50, 30:45] = 2.0
+    depth[20:24, 45] = 0.0  # the seam: no reading
+    depth[20:24, 46:49] = 2.3  # the piece
+    background = np.full_like(depth, 4.0)
+    piece = np.zeros(depth.shape, bool)
+    piece[20:24, 46:49] = True
+
+    def kept(**options):
+        mask = dp.foreground_mask(depth, background, **options)
+        assert mask[10:50, 30:45].all()
+        return bool(mask[piece].all()), bool(mask[piece].any())
+
+    assert kept() == (True, True)  # every piece joins by default
+    assert kept(min_joined_piece=12) == (True, True)
+    assert kept(min_joined_piece=13) == (False, False)
+    assert kept(attach_depth=0.35) == (True, True)
+    assert kept(attach_depth=0.25) == (False, False)
+
+
 def test_bad_mask_and_background():
     with pytest.raises(dp.InvalidInputError, match="mask"):
         dp.depth_to_points(GOOD, CAM, mask=np.ones((3, 3), bool))
@@ -218,6 +241,7 @@ _NEGATIVE_INT_CALLS = {
     "radius": lambda: dp.surface_normals(GOOD, _CAM, radius=-1),
     "connectivity": lambda: dp.pixel_graph(GOOD, _CAM, connectivity=-4),
     "min_component": lambda: dp.foreground_mask(GOOD, min_component=-1),
+    "min_joined_piece": lambda: dp.foreground_mask(GOOD, GOOD + 1, min_joined_piece=-1),
     "rings": lambda: dp.BodyModel().superquadric_meshes(dp.BodyModel.neutral_pose(), rings=-3),
     "samples": lambda: dp.surface_context(GOOD, _CAM, samples=-1),
 }

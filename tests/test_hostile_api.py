@@ -143,6 +143,8 @@ APIS: dict[str, Api] = {
         max_step=("real", 0.25),
         min_component=("int", 10),
         large_share=("real", 0.3),
+        attach_depth=("real", 0.5),
+        min_joined_piece=("int", 0),
     ),
     "point_cloud": api(
         dp.point_cloud,

@@ -318,6 +318,8 @@ def foreground_mask(
     max_step: float = 0.25,
     min_component: int = 40,
     large_share: float = 0.3,
+    attach_depth: float = 0.5,
+    min_joined_piece: int = 0,
 ) -> npt.NDArray[np.bool_]:
     """The person's pixels (H, W) bool.
 
@@ -327,9 +329,9 @@ def foreground_mask(
     ``max_step``); the nearest component with at least ``large_share`` of the largest
     one's pixels is the body. Large pieces next to it are kept too, and every piece
     that meets it across a dropout seam of up to 3 pixels with a depth step under
-    0.5 m (a side view's far leg behind the near one, the small pieces noise breaks
-    a thin limb into). Dropouts the silhouette surrounds or that bite into its edge
-    join the mask.
+    ``attach_depth`` (a side view's far leg behind the near one, the small pieces
+    noise breaks a thin limb into). Dropouts the silhouette surrounds or that bite
+    into its edge join the mask.
 
     Without it, the person is found automatically (:func:`segment_person`): the floor and
     walls are removed and the most person-like object in ``[min_depth, max_depth]`` is
@@ -354,6 +356,13 @@ def foreground_mask(
         Smallest component kept, pixels.
     large_share
         Share of the largest component's pixels a component needs to be the body.
+    attach_depth
+        The largest depth step, metres, across which a piece joins the body (for a
+        large piece beside it, the largest difference of their median depths).
+    min_joined_piece
+        With a background: the smallest piece, pixels, that joins the body across a
+        dropout seam (0: every one). Depth from a stereo pair leaves small mismatch
+        islands beside the body, which ``min_component`` keeps out.
 
     Raises
     ------

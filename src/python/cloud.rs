@@ -145,6 +145,8 @@ keywords! {
         max_step: Real = Real::new(0.25),
         min_component: Int = Int::new(40),
         large_share: Real = Real::new(0.3),
+        attach_depth: Real = Real::new(0.5),
+        min_joined_piece: Int = Int::new(0),
     }
 }
 
@@ -153,7 +155,8 @@ keywords! {
 #[pyo3(signature = (depth, background=None, **options),
        text_signature = "(depth, background=None, *, camera=None, min_depth=0.3, max_depth=8.0, \
                          bg_tolerance=0.025, bg_tolerance_quadratic=0.003, max_step=0.25, \
-                         min_component=40, large_share=0.3)")]
+                         min_component=40, large_share=0.3, attach_depth=0.5, \
+                         min_joined_piece=0)")]
 fn foreground_mask<'py>(
     py: Python<'py>,
     depth: &Bound<'py, PyAny>,
@@ -169,7 +172,8 @@ fn foreground_mask<'py>(
         max_step: o.max_step.get_f32("max_step")?,
         min_component: o.min_component.count("min_component")?,
         large_share: o.large_share.get_f32("large_share")?,
-        ..Default::default()
+        attach_depth: o.attach_depth.get_f32("attach_depth")?,
+        min_joined_piece: o.min_joined_piece.count("min_joined_piece")?,
     };
     let d = depth_array(depth, "depth")?;
     let bg = background
