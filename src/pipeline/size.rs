@@ -141,7 +141,8 @@ impl Estimator {
                     .collect();
             }
         }
-        // The turns ran with the body at `from`: they run again with the body sized.
+        // A body the walk resized is turned again with its own size; at `from` the
+        // caller's turns (or its choice to run none) stand.
         let mut best = self.turned_at_size(frame, best, 1.0 + from as f64 * step)?;
         best.fit = self.label_all(frame, best.fit, &best.model)?;
         best.lean = lean;
