@@ -11,7 +11,9 @@
 //! Each lost limb is set in turn to the poses of [`super::limbs`] and to the pose of
 //! the opposite limb (its mirror image), the rest of the body kept, and takes the one
 //! that ranks best when it ranks better than the limb as it was. A body changed so is
-//! refitted briefly, and the refit replaces the fit only when it ranks better by
+//! refitted briefly, beside the next best-ranked poses scored
+//! ([`super::limbs::REFITTED_STARTS`] in all), and the best-ranked refit replaces the
+//! fit only when it ranks better by
 //! `switch_margin`, as any reading the motion does not support, and draws each
 //! re-initialised limb on the person: a limb hidden in the body, or still off the
 //! person, is not found. (Hiding a limb costs the discrepancy little where the limb it
