@@ -227,7 +227,9 @@ mod tests {
     use super::*;
     use crate::body::BodyModel;
     use crate::camera::Camera;
-    use crate::pipeline::tests::{estimator, mean_joint_error_of, room_posed, walking};
+    use crate::pipeline::tests::{
+        estimator, mean_joint_error_of, rendered_person, room_posed, walking,
+    };
     use crate::pipeline::PipelineConfig;
 
     #[test]
@@ -328,8 +330,7 @@ mod tests {
         pose = with_limb(&pose, param::R_SHOULDER, &ARM_POSES[8]);
         pose = with_limb(&pose, param::L_SHOULDER, &[0.4, 0.6, 0.0, 0.3]);
         pose = with_limb(&pose, param::R_HIP, &[0.1, 0.5, 0.1]);
-        let (depth, labels) = model.render_depth(&pose, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let (depth, mask) = rendered_person(&model, &pose, &camera);
         let est = estimator(&camera, PipelineConfig::default()).with_size_search(false);
         let res = crate::pool::on_worker(|| est.estimate(&depth, Some(&mask))).unwrap();
         let error = mean_joint_error_of(&model, &res, &pose);

@@ -148,7 +148,9 @@ mod tests {
     use crate::body::{param, BodyModel, Pose};
     use crate::camera::Camera;
     use crate::pipeline::limbs::ARM_POSES;
-    use crate::pipeline::tests::{estimator, mean_joint_distance, room, room_posed, walking};
+    use crate::pipeline::tests::{
+        estimator, mean_joint_distance, rendered_person, room, room_posed, walking,
+    };
     use crate::pipeline::PipelineConfig;
 
     /// `pose` with its right arm out sideways.
@@ -166,8 +168,7 @@ mod tests {
         let model = BodyModel::default();
         let camera = Camera::itop();
         let truth = walking(&model, 0.0);
-        let (depth, labels) = model.render_depth(&truth, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l != BACKGROUND_LABEL).collect();
+        let (depth, mask) = rendered_person(&model, &truth, &camera);
         let states = |pose: &Pose| {
             let (rendered, labels) = model.render_depth(pose, &camera);
             limb_states(&rendered, &labels, &depth, &mask, DISCREPANCY_CAP)

@@ -54,7 +54,7 @@ mod tests {
     use crate::pipeline::config::PipelineConfig;
     use crate::pipeline::hypotheses::turned;
     use crate::pipeline::orientation::rotate_about_optical_axis;
-    use crate::pipeline::tests::estimator;
+    use crate::pipeline::tests::{estimator, rendered_person};
     use std::f64::consts::PI;
 
     #[test]
@@ -71,8 +71,7 @@ mod tests {
         upright[param::R_KNEE] = 1.9;
         upright[param::L_HIP + 1] = 1.0;
         let pose = rotate_about_optical_axis(&turned(&upright, 0.5), 2.2);
-        let (depth, labels) = model.render_depth(&pose, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let (depth, mask) = rendered_person(&model, &pose, &camera);
         let est = estimator(&camera, PipelineConfig::default());
         let (fit, score) = crate::pool::on_worker(|| {
             let mut frame = est.prepare(&depth, Some(&mask), None)?;

@@ -174,6 +174,7 @@ pub fn rotate_about_optical_axis(pose: &Pose, theta: f64) -> Pose {
 mod tests {
     use super::*;
     use crate::body::BodyModel;
+    use crate::pipeline::tests::rendered_person;
 
     #[test]
     fn an_upright_body_has_no_tilt_and_a_rolled_one_its_roll() {
@@ -181,8 +182,7 @@ mod tests {
         let model = BodyModel::new(1.75).unwrap();
         for roll in [0.0, 0.5, -1.2, 2.0] {
             let pose = rotate_about_optical_axis(&BodyModel::neutral_pose(), roll);
-            let (depth, labels) = model.render_depth(&pose, &camera);
-            let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+            let (depth, mask) = rendered_person(&model, &pose, &camera);
             let tilt = long_axis_tilt(&depth, &mask, &camera).unwrap();
             // The tilt is the roll up to a half turn.
             let mut d = (tilt - roll).rem_euclid(PI);
@@ -200,8 +200,7 @@ mod tests {
         let upright = BodyModel::neutral_pose();
         let roll = 1.1;
         let rolled = rotate_about_optical_axis(&upright, roll);
-        let (depth, labels) = model.render_depth(&rolled, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let (depth, mask) = rendered_person(&model, &rolled, &camera);
         let view = rotated_view(&depth, &mask, &camera, -roll, 4).unwrap();
         // The upright body rendered by the view's camera covers the same pixels.
         let (want, _) = model.render_depth(&upright, &view.camera);

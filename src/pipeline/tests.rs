@@ -4,6 +4,7 @@
 use super::*;
 use crate::body::{BodyModel, Pose};
 use crate::camera::Camera;
+use crate::render::BACKGROUND_LABEL;
 use crate::templates::{TemplateConfig, TemplateDatabase};
 use nalgebra::Vector3;
 use std::sync::{Arc, OnceLock};
@@ -86,6 +87,18 @@ fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {
 }
 
 /// The mean distance between two sets of joints.
+/// `pose` rendered with `model` by `camera` with nothing behind it: the depth (0 off
+/// the body) and the body's pixels, the person's mask.
+pub(crate) fn rendered_person(
+    model: &BodyModel,
+    pose: &Pose,
+    camera: &Camera,
+) -> (Vec<f32>, Vec<bool>) {
+    let (depth, labels) = model.render_depth(pose, camera);
+    let mask = labels.iter().map(|&l| l != BACKGROUND_LABEL).collect();
+    (depth, mask)
+}
+
 pub(crate) fn mean_joint_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len() as f64
 }
@@ -366,8 +379,7 @@ fn a_body_upside_down_is_found_by_the_wide_search() {
     upright[17] = 0.35; // right hip abduction
     upright[20] = 0.35;
     let pose = orientation::rotate_about_optical_axis(&upright, std::f64::consts::PI - 0.1);
-    let (depth, labels) = model.render_depth(&pose, &camera);
-    let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+    let (depth, mask) = rendered_person(&model, &pose, &camera);
     let est = estimator(&camera, PipelineConfig::default());
     let r = crate::pool::on_worker(|| {
         let mut frame = est.prepare(&depth, Some(&mask), None)?;

@@ -126,7 +126,7 @@ mod tests {
     use super::*;
     use crate::body::{param, root_rotation, BodyModel, NUM_SHAPE_FACTORS};
     use crate::camera::Camera;
-    use crate::pipeline::tests::{estimator, mean_joint_distance, walking};
+    use crate::pipeline::tests::{estimator, mean_joint_distance, rendered_person, walking};
     use crate::pipeline::PipelineConfig;
     use nalgebra::Vector3;
 
@@ -171,8 +171,7 @@ mod tests {
     ) {
         let model = BodyModel::default();
         let camera = Camera::itop();
-        let (depth, labels) = model.render_depth(&pose, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let (depth, mask) = rendered_person(&model, &pose, &camera);
         let est = estimator(&camera, PipelineConfig::default());
         crate::pool::on_worker(|| {
             let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
@@ -271,8 +270,7 @@ mod tests {
             .with_shape_factors(&[1.1; NUM_SHAPE_FACTORS])
             .unwrap();
         let camera = Camera::itop();
-        let (depth, labels) = subject.render_depth(&pose, &camera);
-        let mask: Vec<bool> = labels.iter().map(|&l| l >= 0).collect();
+        let (depth, mask) = rendered_person(&subject, &pose, &camera);
         let est = estimator(&camera, PipelineConfig::default());
         crate::pool::on_worker(|| {
             let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
