@@ -1880,7 +1880,9 @@ class PipelineConfig:
     any_roll
         The search also looks at the frame rotated about the optical axis: the views
         that turn a leaning or lying body upright, head up and head down, and, for a
-        body explained badly, every eighth of a turn. Default True.
+        body explained badly, every eighth of a turn. From scratch, a body that these
+        first views read badly is also searched on each of them alone
+        (``timings["views"]``). Default True.
     limb_poses
         From scratch (``estimate`` and a track's first frame), the search's best fit
         also tries each limb in a wider set of poses (arms overhead or in a V, kicks, a

@@ -1,7 +1,10 @@
 //! The pose of a frame with nothing known: the template search, then the limb poses
 //! ([`super::limbs`]), the turns ([`super::turns`]: the half turn always, every eighth
 //! of a turn for a badly explained fit), then the body's size ([`super::size`]), whose
-//! search runs the turns again when it changes the body.
+//! search runs the turns again when it changes the body. When the search looked at
+//! more than one first view (a leaning or lying silhouette) and its fit explains the
+//! depth badly, each first view is also searched alone, with its own limb poses and
+//! turns (`Estimator::searched_per_view`).
 //! `Estimator::estimate` and a track's first frame both run it.
 //!
 //! A result that explains the depth badly ([`Estimator::explains_badly`]: what the
@@ -19,16 +22,19 @@
 //! commonest: they get the size they need before the rolled ones compete with them.
 //! Frames explained well pay for none of these.
 
-use super::estimator::{Estimator, Frame};
+use super::estimator::{Estimator, Frame, Views};
 use super::result::Clock;
 use super::size::SizedFit;
+use crate::body::Pose;
 use crate::error::Result;
+use crate::fit::FitResult;
 
 impl Estimator {
     /// The best fit of `frame` from scratch, with the body's size found when `size`,
     /// labelled at every pixel. Laps `clock` at "templates", "fit" and, when the wide
-    /// search runs, "wide" (and "neutral" for the neutral bodies' fits), and "sizes" when
-    /// the search at an end of the size range runs.
+    /// search runs, "wide" (and "neutral" for the neutral bodies' fits), "sizes" when
+    /// the search at an end of the size range runs, and "views" when each first view is
+    /// searched alone.
     pub(crate) fn fit_from_scratch(
         &self,
         frame: &mut Frame,
@@ -37,8 +43,10 @@ impl Estimator {
     ) -> Result<SizedFit> {
         let hypotheses = self.config().hypotheses;
         let (best, score) = self.search(frame, &[], hypotheses, Some(clock))?;
+        let searched = best.pose;
         let (best, score) = self.repose_limbs(frame, best, score)?;
         let (best, score) = self.try_turns(frame, best, score)?;
+        let (best, score) = self.searched_per_view(frame, best, score, &searched, clock)?;
         let unsized_rank = self.rank(score, &best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
         clock.lap("fit");
@@ -84,5 +92,56 @@ impl Estimator {
             }
         }
         Ok(sized)
+    }
+
+    /// `fit` (with `score`, its depth discrepancy) or, when it explains the depth badly
+    /// and the search looked at more than one first view, the best-ranked of the
+    /// searches on each first view alone, each followed by its limb poses and turns,
+    /// where that ranks better. `searched` is the first search's result before its limb
+    /// poses and turns: a view whose search ends there adds nothing. Laps `clock` at
+    /// "views" when they run.
+    ///
+    /// Searched together, the views compete for the hypotheses and only the winner's
+    /// fit is turned: a raised arm tilts an upright body's silhouette, a view rolled
+    /// upright then draws it upside down well enough to win, and the upright reading,
+    /// which explains the depth better once its limbs are reposed and it is turned, is
+    /// never reached. Alone, each view has the whole budget, its own limb poses and its
+    /// own turns. These are first-view readings, as likely as the first search's, so no
+    /// `switch_margin` applies.
+    fn searched_per_view(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        score: f64,
+        searched: &Pose,
+        clock: &mut Clock,
+    ) -> Result<(FitResult, f64)> {
+        let rolls = self.first_rolls(frame);
+        if rolls.len() < 2 || !self.explains_badly(frame, score) {
+            return Ok((fit, score));
+        }
+        clock.lap("fit");
+        let (mut best, mut best_score) = (fit, score);
+        let mut best_rank = self.rank(score, &best.pose);
+        let hypotheses = self.config().hypotheses;
+        for roll in rolls {
+            let views = Views {
+                rolls: &[roll],
+                distinct: true,
+            };
+            let (fit, score) = self.search_views(frame, &[], hypotheses, &views, None)?;
+            if fit.pose == *searched {
+                // The first search's own result: its limb poses and turns ran already.
+                continue;
+            }
+            let (fit, score) = self.repose_limbs(frame, fit, score)?;
+            let (fit, score) = self.try_turns(frame, fit, score)?;
+            let rank = self.rank(score, &fit.pose);
+            if rank < best_rank {
+                (best, best_score, best_rank) = (fit, score, rank);
+            }
+        }
+        clock.lap("views");
+        Ok((best, best_score))
     }
 }
