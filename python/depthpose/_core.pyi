@@ -1925,7 +1925,7 @@ class PipelineConfig:
         A re-check switches when it explains the depth better by this share; from
         scratch the wide search's and the size end's fits replace the first by the
         same, and on a lost frame a re-initialised limb replaces the tracked one by it
-        too. Default 0.1.
+        too. Default 0.05.
     pose_prior_weight
         Weight of the rest-pose penalty where poses compete. Default 0.005.
     size_range, size_step

@@ -134,7 +134,7 @@ impl Default for PipelineConfig {
             recheck_every: 0,
             recheck_hypotheses: 4,
             lost_hypotheses: 8,
-            switch_margin: 0.1,
+            switch_margin: 0.05,
             pose_prior_weight: 0.005,
             size_range: 0.15,
             size_step: 0.05,
