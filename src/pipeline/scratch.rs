@@ -44,8 +44,7 @@ impl Estimator {
         let hypotheses = self.config().hypotheses;
         let (best, score) = self.search(frame, &[], hypotheses, Some(clock))?;
         let searched = best.pose;
-        let (best, score) = self.repose_limbs(frame, best, score)?;
-        let (best, score) = self.try_turns(frame, best, score)?;
+        let (best, score) = self.reposed_and_turned(frame, best, score)?;
         let (best, score) = self.searched_per_view(frame, best, score, &searched, clock)?;
         let unsized_rank = self.rank(score, &best.pose);
         let mut sized = self.fit_size(frame, best, score, size)?;
@@ -94,6 +93,18 @@ impl Estimator {
         Ok(sized)
     }
 
+    /// A search's `fit` (with `score`, its depth discrepancy) with its limbs re-posed
+    /// ([`super::limbs`]) and then turned ([`super::turns`]) where each ranks better.
+    pub(super) fn reposed_and_turned(
+        &self,
+        frame: &mut Frame,
+        fit: FitResult,
+        score: f64,
+    ) -> Result<(FitResult, f64)> {
+        let (fit, score) = self.repose_limbs(frame, fit, score)?;
+        self.try_turns(frame, fit, score)
+    }
+
     /// `fit` (with `score`, its depth discrepancy) or, when it explains the depth badly
     /// and the search looked at more than one first view, the best-ranked of the
     /// searches on each first view alone, each followed by its limb poses and turns,
@@ -134,8 +145,7 @@ impl Estimator {
                 // The first search's own result: its limb poses and turns ran already.
                 continue;
             }
-            let (fit, score) = self.repose_limbs(frame, fit, score)?;
-            let (fit, score) = self.try_turns(frame, fit, score)?;
+            let (fit, score) = self.reposed_and_turned(frame, fit, score)?;
             let rank = self.rank(score, &fit.pose);
             if rank < best_rank {
                 (best, best_score, best_rank) = (fit, score, rank);

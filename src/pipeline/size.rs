@@ -171,8 +171,7 @@ impl Estimator {
         let mut at_end = self.clone();
         at_end.set_model(self.model_at_size(end)?);
         let (best, score) = at_end.search(frame, &[], hypotheses, None)?;
-        let (best, score) = at_end.repose_limbs(frame, best, score)?;
-        let (best, score) = at_end.try_turns(frame, best, score)?;
+        let (best, score) = at_end.reposed_and_turned(frame, best, score)?;
         self.walk_sizes(frame, best, score, end, steps).map(Some)
     }
 
