@@ -2,8 +2,9 @@
 """End-to-end accuracy and speed of ``depthpose.pipeline.estimate_frames`` on the shared
 synthetic sequences.
 
-For every sequence (``../shared/data/synth/*.npz`` by default): tracked over every frame,
-and from scratch over every ``--step``-th frame, each with the sequence's background
+For every sequence (``../shared/data/synth/*.npz`` by default): tracked over every frame
+(every ``--track-step``-th: N times the motion per frame), and from scratch over every
+``--step``-th frame, each with the sequence's background
 frame and the default template database. Scored with ``depthpose.metrics.evaluate``
 (the definitions of ``shared/tools/eval_pose.py``: MPJPE over finite predictions,
 PCK@10cm with NaN counted as wrong). Prints per-sequence, per-joint and overall tables,
@@ -17,6 +18,7 @@ template search, and re-initialised / switched frames separately) and the peak r
     python scripts/eval_pipeline.py --mode track --height 1.60 --calibrate on
     python scripts/eval_pipeline.py --mode track --no-background --learn-background
     python scripts/eval_pipeline.py --mirror              # the corpus in a mirror
+    python scripts/eval_pipeline.py --mode track --track-step 3   # 3× the motion per frame
 
 The person's mask of each frame is scored against the sequence's ground-truth ``mask``
 (intersection over union, a failed frame counting 0), over every frame and from frame
@@ -114,13 +116,13 @@ def _upsampled(depth, camera, background, u: int):
     return depth, camera.scaled(u), background
 
 
-def _run(scene: Scene, templates, config, *, track: bool, step: int, model=None,
-         calibrate=None, background=True, upsample=1):  # fmt: skip
+def _run(scene: Scene, templates, config, *, track: bool, step: int, track_step: int = 1,
+         model=None, calibrate=None, background=True, upsample=1):  # fmt: skip
     from depthpose.pipeline import estimate_frames
 
     sources: list[str] = []
     masks = scene.masks
-    idx = np.arange(0, scene.depth.shape[0], 1 if track else step)
+    idx = np.arange(0, scene.depth.shape[0], track_step if track else step)
     # Mask IoU per frame (a failed frame keeps 0) and the segmentation stage's times.
     ious = np.zeros(len(idx))
     seg_ms: list[float] = []
@@ -180,6 +182,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seq", nargs="*", default=None, help="substrings of sequence names")
     ap.add_argument("--mode", choices=["both", "track", "scratch"], default="both")
     ap.add_argument("--step", type=int, default=2, help="from scratch: every STEP-th frame")
+    ap.add_argument(
+        "--track-step",
+        type=int,
+        default=1,
+        help="tracked: every N-th frame (N times the motion per frame, as at 1/N of the "
+        "frame rate; default 1)",
+    )
     ap.add_argument("--frames", type=int, default=None, help="first N frames of each")
     ap.add_argument("--start", type=int, default=0, help="first frame of each sequence")
     ap.add_argument("--config", default=None, help="PipelineConfig fields as JSON")
@@ -236,6 +245,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.step < 1:
         ap.error("--step must be >= 1")
+    if args.track_step < 1:
+        ap.error("--track-step must be >= 1")
     if args.upsample < 1:
         ap.error("--upsample must be >= 1")
 
@@ -273,7 +284,8 @@ def main(argv: list[str] | None = None) -> int:
         for k, v in config.as_dict().items()
     }
     summary: dict = {"sequences": {}, "config": settings, "height": args.height,
-                     "calibrate": args.calibrate, "upsample": args.upsample}  # fmt: skip
+                     "calibrate": args.calibrate, "upsample": args.upsample,
+                     "track_step": args.track_step}  # fmt: skip
     for f in files:
         scene = _load(f, args.frames, args.start, args.mirror)
         depth, gt = scene.depth, scene.gt
@@ -282,8 +294,8 @@ def main(argv: list[str] | None = None) -> int:
         for m in modes:
             idx, r, t, wall, ious, seg_ms, learn_ms = _run(
                 scene, templates, config, track=m == "track", step=args.step,
-                model=model, calibrate=calibrate, background=args.background,
-                upsample=args.upsample,
+                track_step=args.track_step, model=model, calibrate=calibrate,
+                background=args.background, upsample=args.upsample,
             )  # fmt: skip
             times[f"segment_{m}"] += seg_ms
             times["learn"] += learn_ms
