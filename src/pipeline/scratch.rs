@@ -127,8 +127,11 @@ impl Estimator {
         searched: &Pose,
         clock: &mut Clock,
     ) -> Result<(FitResult, f64)> {
+        if !self.explains_badly(frame, score) {
+            return Ok((fit, score));
+        }
         let rolls = self.first_rolls(frame);
-        if rolls.len() < 2 || !self.explains_badly(frame, score) {
+        if rolls.len() < 2 {
             return Ok((fit, score));
         }
         clock.lap("fit");

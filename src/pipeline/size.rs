@@ -67,10 +67,15 @@ impl Estimator {
         size_steps(cfg.size_range, cfg.size_step) as i64
     }
 
-    /// The estimator's model scaled by 1 + `k`·`size_step`.
+    /// The scale of size step `k`: 1 + `k`·`size_step`.
+    fn scale_at(&self, k: i64) -> f64 {
+        1.0 + k as f64 * self.config().size_step
+    }
+
+    /// The estimator's model scaled by [`Self::scale_at`] `k`.
     fn model_at_size(&self, k: i64) -> Result<BodyModel> {
-        let scale = 1.0 + k as f64 * self.config().size_step;
-        self.model().with_shape_factors(&[scale; NUM_SHAPE_FACTORS])
+        self.model()
+            .with_shape_factors(&[self.scale_at(k); NUM_SHAPE_FACTORS])
     }
 
     /// `fit` (made with the body at size step `from`, `score` its discrepancy) refitted
@@ -90,11 +95,10 @@ impl Estimator {
         from: i64,
         steps: i64,
     ) -> Result<SizedFit> {
-        let step = self.config().size_step;
         let mut best = SizedFit {
             fit,
             score,
-            scale: 1.0 + from as f64 * step,
+            scale: self.scale_at(from),
             lean: 0,
             model: self.model_at_size(from)?,
         };
@@ -108,7 +112,7 @@ impl Estimator {
             let mut round: Vec<i64> = [from - 1, from + 1].into_iter().filter(within).collect();
             let (mut low, mut high) = (from, from);
             while !round.is_empty() {
-                let scales: Vec<f64> = round.iter().map(|&k| 1.0 + k as f64 * step).collect();
+                let scales: Vec<f64> = round.iter().map(|&k| self.scale_at(k)).collect();
                 let tried = self.fits_at_sizes(frame, &config, &start, &scales)?;
                 low = low.min(round.iter().copied().min().unwrap_or(from));
                 high = high.max(round.iter().copied().max().unwrap_or(from));
@@ -143,7 +147,7 @@ impl Estimator {
         }
         // A body the walk resized is turned again with its own size; at `from` the
         // caller's turns (or its choice to run none) stand.
-        let mut best = self.turned_at_size(frame, best, 1.0 + from as f64 * step)?;
+        let mut best = self.turned_at_size(frame, best, self.scale_at(from))?;
         best.fit = self.label_all(frame, best.fit, &best.model)?;
         best.lean = lean;
         Ok(best)

@@ -86,7 +86,6 @@ fn mean_joint_error(a: &PoseResult, pose: &Pose) -> f64 {
     mean_joint_error_of(&BodyModel::default(), a, pose)
 }
 
-/// The mean distance between two sets of joints.
 /// `pose` rendered with `model` by `camera` with nothing behind it: the depth (0 off
 /// the body) and the body's pixels, the person's mask.
 pub(crate) fn rendered_person(
@@ -99,6 +98,7 @@ pub(crate) fn rendered_person(
     (depth, mask)
 }
 
+/// The mean distance between two sets of joints.
 pub(crate) fn mean_joint_distance(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> f64 {
     a.iter().zip(b).map(|(p, q)| (p - q).norm()).sum::<f64>() / a.len() as f64
 }
