@@ -2163,7 +2163,9 @@ class PoseTracker:
     ----------
     camera, model, templates, config, background
         As for :class:`PoseEstimator`. Without a ``model`` the body's size is found on
-        the first frame and the shape is calibrated from there.
+        the first frame (again on a few later frames, ``timings["resize"]``, while no
+        frame read from scratch is explained well) and the shape is calibrated from
+        there.
     calibrate
         Fit the subject's body shape over the first usable frames (default None: when
         no ``model`` is given; a given model is taken as the subject's known shape).

@@ -32,6 +32,30 @@ pub struct Timings {
 }
 
 impl Timings {
+    /// Adds `other`'s stages (summed where both ran one) and total: one result for
+    /// work done twice on the same frame.
+    pub fn add(&mut self, other: &Timings) {
+        for &(stage, ms) in &other.stages {
+            self.add_stage(stage, ms);
+        }
+        self.total += other.total;
+    }
+
+    /// Adds a stage that took `ms` (to the stage's time when it ran already) and its
+    /// time to the total: work done after the frame's clock stopped.
+    pub fn push(&mut self, stage: &'static str, ms: f64) {
+        self.add_stage(stage, ms);
+        self.total += ms;
+    }
+
+    /// Adds `ms` to `stage` (a new stage when it has not run); the total is the caller's.
+    fn add_stage(&mut self, stage: &'static str, ms: f64) {
+        match self.stages.iter_mut().find(|(s, _)| *s == stage) {
+            Some(entry) => entry.1 += ms,
+            None => self.stages.push((stage, ms)),
+        }
+    }
+
     /// The time of `stage`, if it ran.
     pub fn get(&self, stage: &str) -> Option<f64> {
         self.stages.iter().find(|(s, _)| *s == stage).map(|s| s.1)
@@ -60,10 +84,7 @@ impl Clock {
         let now = Instant::now();
         let ms = (now - self.last).as_secs_f64() * 1e3;
         self.last = now;
-        match self.timings.stages.iter_mut().find(|(s, _)| *s == stage) {
-            Some(entry) => entry.1 += ms,
-            None => self.timings.stages.push((stage, ms)),
-        }
+        self.timings.add_stage(stage, ms);
     }
 
     pub fn finish(mut self) -> Timings {

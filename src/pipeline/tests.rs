@@ -310,7 +310,11 @@ fn hypotheses_start_from_their_better_placed_copy() {
 
 /// `depth` with zero-mean Gaussian noise of `noise`'s σ_Z at each depth (Box–Muller on
 /// a fixed linear congruential generator: deterministic).
-fn with_depth_noise(depth: &[f32], noise: &crate::fit::DepthNoise, mut state: u64) -> Vec<f32> {
+pub(crate) fn with_depth_noise(
+    depth: &[f32],
+    noise: &crate::fit::DepthNoise,
+    mut state: u64,
+) -> Vec<f32> {
     let mut uniform = move || {
         state = state
             .wrapping_mul(6364136223846793005)

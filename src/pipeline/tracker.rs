@@ -16,7 +16,11 @@
 //! raises the discrepancy of a body that fits as well as the model can.
 //!
 //! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
-//! first frame ([`super::size`]). It then collects usable frames (any but a track's
+//! first frame ([`super::size`]). A size found on a frame it explains badly is
+//! provisional: a later frame still explained badly (the 2nd, 3rd, 5th, 9th, ...: a few
+//! searches, not one a frame) is read again from scratch with the size searched, and a
+//! reading that explains it well and ranks better replaces the track and its size. It
+//! then collects usable frames (any but a track's
 //! first whose fit explains enough of the person) and, once it has enough, fits the
 //! body shape to them all together ([`crate::fit::fit_shape`]), starting from the sized
 //! body; it tracks with that shape from then on. A calibration that fails leaves the
@@ -77,6 +81,8 @@ pub struct Tracker {
     calibrate: bool,
     /// The body's size relative to the base model, once found (on the first frame).
     size: Option<f64>,
+    /// The size was found on a frame it explains badly: see [`Tracker::resized`].
+    size_provisional: bool,
     track: Track,
     calibration: Calibration,
     frames: usize,
@@ -104,6 +110,7 @@ impl Tracker {
             base_model,
             calibrate,
             size: None,
+            size_provisional: false,
             track: Track::default(),
             calibration: Calibration::default(),
             frames: 0,
@@ -170,6 +177,7 @@ impl Tracker {
             self.calibration = Calibration::default();
             self.estimator.set_model(self.base_model.clone());
             self.size = None;
+            self.size_provisional = false;
             self.frames = 0;
         }
     }
@@ -209,11 +217,24 @@ impl Tracker {
                 let res = est.result(&mut frame, fitted, Source::Templates, clock);
                 if search_size {
                     self.size = Some(sized.scale);
+                    self.size_provisional = est.explains_badly(&frame, sized.score);
                     self.estimator.set_model(sized.model);
                 }
                 (res, frame, true)
             }
-            Some(_) => self.tracked(depth, mask)?,
+            Some(_) => {
+                let (res, frame, switched) = self.tracked(depth, mask)?;
+                // Tried on the 2nd, 3rd, 5th, 9th, ... frame: a size nothing explains well
+                // (a noisy sensor) costs a few searches, not one per frame.
+                if self.size_provisional
+                    && self.frames.is_power_of_two()
+                    && self.estimator.explains_badly(&frame, res.discrepancy)
+                {
+                    self.resized(frame, res, switched)?
+                } else {
+                    (res, frame, switched)
+                }
+            }
         };
         self.frames += 1;
         self.track.hint = frame.segmentation.as_ref().map(|s| s.hint());
@@ -345,6 +366,54 @@ impl Tracker {
         Ok((res, frame, switch || refound))
     }
 
+    /// A tracked frame (`res`) that still explains the depth badly while the body's size
+    /// is provisional, read again from scratch with the size searched from the base
+    /// model; a reading that explains the depth well and ranks better replaces the
+    /// track's, body size included, and the shape calibration starts again at that
+    /// size. Returns the result, the frame and whether it switched.
+    ///
+    /// A first frame explained badly is a poor witness of the body's size (a raised
+    /// arm read as the head makes the body taller), and every later frame is then
+    /// searched at that size: the track cannot recover. So a size found on a frame it
+    /// explains badly stays provisional until a frame read from scratch is explained
+    /// well.
+    fn resized(
+        &mut self,
+        mut frame: Frame,
+        mut res: PoseResult,
+        switched: bool,
+    ) -> Result<(PoseResult, Frame, bool)> {
+        // The search's whole time is the result's "resize" stage, whatever it finds.
+        let mut clock = Clock::start();
+        let tracked_model = self.estimator.model().clone();
+        self.estimator.set_model(self.base_model.clone());
+        let sized = self
+            .estimator
+            .fit_from_scratch(&mut frame, &mut clock, true);
+        self.estimator.set_model(tracked_model);
+        let sized = sized?;
+        res.timings.push("resize", clock.finish().total);
+        let est = &self.estimator;
+        let better = est.rank(sized.score, &sized.fit.pose) < est.rank(res.discrepancy, &res.pose);
+        if !better || est.explains_badly(&frame, sized.score) {
+            return Ok((res, frame, switched));
+        }
+        let fitted = Fitted {
+            fit: sized.fit,
+            discrepancy: sized.score,
+            model: &sized.model,
+            rendered: None,
+        };
+        let mut new = est.result(&mut frame, fitted, Source::Templates, Clock::start());
+        new.timings.add(&res.timings);
+        self.size_provisional = false;
+        self.size = Some(sized.scale);
+        self.estimator.set_model(sized.model);
+        // The frames kept, or the shape fitted, belong to the old size.
+        self.calibration = Calibration::default();
+        Ok((new, frame, true))
+    }
+
     /// The previous pose moved on by the damped velocity, within the joint limits.
     fn predict(&self) -> Pose {
         let prev = self.track.previous.expect("a track");
@@ -420,8 +489,7 @@ impl Tracker {
         let outcome = fit_shape(&frames, &camera, sized, &poses, &shape_config);
         self.finish_calibration(outcome);
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        res.timings.stages.push(("calibration", ms));
-        res.timings.total += ms;
+        res.timings.push("calibration", ms);
     }
 }
 
@@ -451,8 +519,7 @@ impl Tracker {
             hint.background = model.learned();
         }
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        res.timings.stages.push(("background", ms));
-        res.timings.total += ms;
+        res.timings.push("background", ms);
         Ok(())
     }
 
@@ -504,6 +571,7 @@ fn error_text(e: &Error) -> String {
 mod tests {
     use super::super::tests::{
         default_templates, mean_joint_error_of, room_posed, room_with_body, walking,
+        with_depth_noise,
     };
     use super::*;
     use crate::camera::Camera;
@@ -536,6 +604,57 @@ mod tests {
         let r = crate::pool::on_worker(|| tracker.update(&room_posed(&model, &pose), None));
         let err = mean_joint_error_of(&model, &r.unwrap(), &pose);
         assert!(err < 0.05, "mean joint error {err}");
+    }
+
+    #[test]
+    fn a_size_misread_on_a_first_frame_explained_badly_is_found_again() {
+        // A 1.57 m body seen from its side, one arm overhead, the other folded by the
+        // head and a knee raised: from scratch the raised arm reads as the head and the
+        // body is sized far too tall, and it explains the depth badly. Then the same
+        // body turned toward the camera, arms folded up: at the first frame's size no
+        // search explains it; read from scratch with its size searched again, it is.
+        let model = BodyModel::new(1.57).unwrap();
+        let first: Pose = [
+            -0.080, 0.0, 3.214, 0.056, 2.024, 0.089, -0.131, 0.079, 2.820, 0.366, 0.571, 0.695,
+            2.029, 0.484, -0.444, 1.800, 1.708, 0.823, 0.586, 0.206, 0.029, 0.32,
+        ];
+        let later: Pose = [
+            -0.165, 0.0, 3.151, -0.093, 0.945, 0.130, 0.061, 0.243, 2.807, 0.860, -0.162, 1.563,
+            0.891, 1.856, 0.332, 2.249, -0.105, 0.007, 0.297, 0.065, 0.063, 0.175,
+        ];
+        let config = PipelineConfig {
+            calibration_frames: 0,
+            ..PipelineConfig::default()
+        };
+        let mut tracker = tracker_of(&BodyModel::default(), config);
+        // The body alone, its mask given, with 5 mm of depth noise at 3.2 m.
+        let noise = crate::fit::DepthNoise {
+            focal_baseline: 100.0,
+            disparity_sigma: 0.049,
+        };
+        let camera = Camera::itop();
+        let seen = |pose: &Pose, seed: u64| {
+            let (depth, _) = model.render_depth(pose, &camera);
+            let mask: Vec<bool> = depth.iter().map(|&z| z > 0.0).collect();
+            (with_depth_noise(&depth, &noise, seed), mask)
+        };
+        let (depth, mask) = seen(&first, 1);
+        let r = crate::pool::on_worker(|| tracker.update(&depth, Some(&mask))).unwrap();
+        let err = mean_joint_error_of(&model, &r, &first);
+        assert!(
+            err > 0.15,
+            "mean joint error {err}: the first frame is read right"
+        );
+        assert!(tracker.size.unwrap() > 0.95, "sized {:?}", tracker.size);
+        assert!(tracker.size_provisional);
+        let (depth, mask) = seen(&later, 2);
+        let r = crate::pool::on_worker(|| tracker.update(&depth, Some(&mask))).unwrap();
+        let err = mean_joint_error_of(&model, &r, &later);
+        assert!(err < 0.02, "mean joint error {err}");
+        assert!(r.timings.get("resize").is_some());
+        let size = tracker.size.unwrap();
+        assert!((size - 1.57 / 1.75).abs() < 0.02, "sized {size}");
+        assert!(!tracker.size_provisional);
     }
 
     /// A tracker of [`Camera::itop`] with `model` and `config`, its shape not calibrated.
