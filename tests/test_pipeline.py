@@ -510,6 +510,33 @@ def test_rest_pose_term_prefers_the_ordinary_twin_of_a_hidden_arm(side_walk, tem
     assert off.penalty(raised)[0] == 0.0
 
 
+def test_an_arm_through_the_trunk_is_charged_by_its_depth_inside(templates):
+    """A hanging arm lies against the trunk and costs nothing beyond the rest-pose
+    penalty; an arm swung into the torso (adducted across the body) is charged
+    ``penetration_weight`` times how deep its axis lies inside, beyond a limb radius."""
+    from depthpose.pipeline import PipelineConfig
+
+    cam = dp.Camera.preset("itop")
+    names = dp.BodyModel().param_names
+    pose = np.asarray(dp.BodyModel().neutral_pose(), np.float64)
+    pose[2] = 3.0
+    inside = pose.copy()
+    inside[names.index("l_shoulder_abduction")] = -0.45
+
+    def penalty(weight: float, p: np.ndarray) -> float:
+        config = PipelineConfig(penetration_weight=weight)
+        return float(PoseEstimator(cam, templates=templates, config=config).penalty(p)[0])
+
+    assert penalty(1.0, pose) == penalty(0.0, pose)
+    depth_inside = penalty(1.0, inside) - penalty(0.0, inside)
+    assert depth_inside > 0.03
+    assert penalty(2.5, inside) - penalty(0.0, inside) == pytest.approx(2.5 * depth_inside)
+    assert PipelineConfig().as_dict()["penetration_weight"] > 0
+    for bad in (-0.1, np.nan, np.inf):
+        with pytest.raises(dp.InvalidInputError, match="penetration_weight"):
+            PipelineConfig(penetration_weight=bad)
+
+
 def test_the_pose_classes_are_the_native_ones_under_every_import_path(wave, templates):
     from depthpose import _core, pipeline, stereo_pose
 

@@ -1928,6 +1928,10 @@ class PipelineConfig:
         too. Default 0.05.
     pose_prior_weight
         Weight of the rest-pose penalty where poses compete. Default 0.005.
+    penetration_weight
+        Weight (per metre) of the arms' depth inside the trunk where poses compete:
+        an arm hidden inside the torso contradicts no pixel, and this charges the pose
+        no body takes (0 = never). Default 0.3.
     size_range, size_step
         From scratch, unless the estimator or tracker was given a ``model``, the best
         fit is refitted with the body scaled by 1 ± k·``size_step`` up to
@@ -2138,9 +2142,10 @@ class PoseEstimator:
     ) -> float:
         """:meth:`discrepancies` of one pose (22,)."""
     def penalty(self, poses: npt.ArrayLike) -> npt.NDArray[np.float64]:
-        """The rest-pose penalty of each of ``poses`` (N, 22) (:func:`rest_pose_penalty`
-        with ``config.pose_prior_weight``): what a pose's discrepancy is charged when
-        poses compete. (N,)."""
+        """What each of ``poses`` (N, 22) is charged on top of its discrepancy when
+        poses compete: the rest-pose penalty (:func:`rest_pose_penalty` with
+        ``config.pose_prior_weight``) plus ``config.penetration_weight`` times how far
+        its arms' axes pass into the trunk beyond a limb radius (metres). (N,)."""
 
 @final
 class PoseTracker:

@@ -35,6 +35,7 @@
 
 pub mod ellipsoid;
 pub mod kinematics;
+pub mod penetration;
 pub mod residuals;
 pub mod rotation;
 pub mod superquadric;

@@ -75,6 +75,12 @@ pub struct PipelineConfig {
     /// rest pose). Where the depth cannot tell where a limb is (hidden behind the
     /// torso), it prefers the ordinary pose.
     pub pose_prior_weight: f64,
+    /// Weight (per metre) of the arm-through-trunk term added to the depth discrepancy
+    /// wherever poses compete: how far the arms' axes pass into the torso and pelvis
+    /// beyond a limb radius ([`crate::body::BodyModel::arm_trunk_penetration`]). An arm
+    /// hidden inside the trunk contradicts no pixel and saves its rest-pose penalty;
+    /// this charges the pose no body takes (0 = never).
+    pub penetration_weight: f64,
     /// From scratch, when the subject's shape is not given, the best fit is also
     /// refitted with the body scaled by 1 ± k·`size_step` up to ± `size_range`, and the
     /// size explaining the depth best is kept ([`super::size`]; 0 = never). A result
@@ -136,6 +142,7 @@ impl Default for PipelineConfig {
             lost_hypotheses: 8,
             switch_margin: 0.05,
             pose_prior_weight: 0.005,
+            penetration_weight: 0.3,
             size_range: 0.15,
             size_step: 0.05,
             fit: FitConfig::default(),
@@ -214,6 +221,13 @@ impl PipelineConfig {
             f64::INFINITY,
             false,
             "pose_prior_weight",
+        )?;
+        real(
+            self.penetration_weight,
+            0.0,
+            f64::INFINITY,
+            false,
+            "penetration_weight",
         )?;
         real(
             self.calibration_prior_weight,

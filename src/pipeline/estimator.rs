@@ -290,14 +290,21 @@ impl Estimator {
     }
 
     /// How a pose with depth discrepancy `score` competes: the discrepancy plus the
-    /// rest-pose penalty ([`Self::penalty`]); lower is better.
+    /// pose's penalty ([`Self::penalty`]); lower is better.
     pub(crate) fn rank(&self, score: f64, pose: &Pose) -> f64 {
         score + self.penalty(pose)
     }
 
-    /// The rest-pose penalty a pose's discrepancy is charged when poses compete.
+    /// What a pose's discrepancy is charged when poses compete: the rest-pose penalty
+    /// and, with `penetration_weight`, its arms' depth inside the trunk.
     pub fn penalty(&self, pose: &Pose) -> f64 {
-        rest_pose_penalty(pose, self.config.pose_prior_weight)
+        let w = self.config.penetration_weight;
+        let inside = if w > 0.0 {
+            w * self.model.arm_trunk_penetration(pose)
+        } else {
+            0.0
+        };
+        rest_pose_penalty(pose, self.config.pose_prior_weight) + inside
     }
 
     /// The views the template search looks at first: the frame as it is, and, with

@@ -87,6 +87,7 @@ impl PyPipelineConfig {
                     "lost_hypotheses" => c.lost_hypotheses = int_field(&value, n)?,
                     "switch_margin" => c.switch_margin = real_field(&value, n)?,
                     "pose_prior_weight" => c.pose_prior_weight = real_field(&value, n)?,
+                    "penetration_weight" => c.penetration_weight = real_field(&value, n)?,
                     "size_range" => c.size_range = real_field(&value, n)?,
                     "size_step" => c.size_step = real_field(&value, n)?,
                     "calibration_frames" => c.calibration_frames = int_field(&value, n)?,
@@ -149,6 +150,7 @@ impl PyPipelineConfig {
         d.set_item("lost_hypotheses", c.lost_hypotheses)?;
         d.set_item("switch_margin", c.switch_margin)?;
         d.set_item("pose_prior_weight", c.pose_prior_weight)?;
+        d.set_item("penetration_weight", c.penetration_weight)?;
         d.set_item("size_range", c.size_range)?;
         d.set_item("size_step", c.size_step)?;
         d.set_item("calibration_frames", c.calibration_frames)?;
