@@ -11,11 +11,11 @@ use super::kinematics::Kinematics;
 use super::{seg, BodyModel, Pose};
 use nalgebra::Vector3;
 
-/// ITOP joint indices of each arm's shoulder, elbow and wrist, and its upper arm's and
-/// forearm's segments (right, left).
-const ARMS: [([usize; 3], [usize; 2]); 2] = [
-    ([2, 4, 6], [seg::R_UPPER_ARM, seg::R_FOREARM]),
-    ([3, 5, 7], [seg::L_UPPER_ARM, seg::L_FOREARM]),
+/// Each arm's upper arm, forearm and hand segments (right, left): their frames' origins
+/// are the shoulder, the elbow and the wrist.
+const ARMS: [[usize; 3]; 2] = [
+    [seg::R_UPPER_ARM, seg::R_FOREARM, seg::R_HAND],
+    [seg::L_UPPER_ARM, seg::L_FOREARM, seg::L_HAND],
 ];
 /// The trunk's segments: torso and pelvis.
 const TRUNK: [usize; 2] = [seg::TORSO, seg::PELVIS];
@@ -31,11 +31,11 @@ impl BodyModel {
     pub fn arm_trunk_penetration(&self, pose: &Pose) -> f64 {
         let kin = Kinematics::new(self, pose);
         let placed = self.placed_ellipsoids(&kin);
-        let joints = kin.joints();
+        let origin = |k: usize| kin.frames[k].translation.vector;
         let radius = |k: usize| placed[k].prepared.radii().min();
         let mut total = 0.0;
-        for ([shoulder, elbow, wrist], [upper, fore]) in ARMS {
-            let (s, e, w) = (joints[shoulder], joints[elbow], joints[wrist]);
+        for [upper, fore, hand] in ARMS {
+            let (s, e, w) = (origin(upper), origin(fore), origin(hand));
             let points: [(Vector3<f64>, f64); 4] = [
                 ((s + e) * 0.5, radius(upper)),
                 (e, radius(upper)),
@@ -75,17 +75,21 @@ mod tests {
         let model = BodyModel::default();
         let mut pose = BodyModel::neutral_pose();
         pose[2] = 3.0;
-        // Adducted across the body and bent back into it: the elbow and forearm inside.
+        // The left arm swung across the body (abduction −0.45): it runs through the trunk.
         pose[param::L_SHOULDER + 1] = -0.45;
         pose[param::L_ELBOW] = 0.0;
         let inside = model.arm_trunk_penetration(&pose);
         assert!(inside > 0.03, "penetration {inside}");
-        // Brute force: the same sum from the signed distances of the same points.
+        // Brute force: the same sum from the ITOP joints (shoulder, elbow, wrist) and the
+        // signed distances to the torso and pelvis ellipsoids.
         let kin = Kinematics::new(&model, &pose);
         let placed = model.placed_ellipsoids(&kin);
-        let j = kin.joints();
+        let j = model.joints(&pose);
         let mut want = 0.0;
-        for ([a, b, c], [upper, fore]) in ARMS {
+        for ([a, b, c], [upper, fore]) in [
+            ([2, 4, 6], [seg::R_UPPER_ARM, seg::R_FOREARM]),
+            ([3, 5, 7], [seg::L_UPPER_ARM, seg::L_FOREARM]),
+        ] {
             let ru = placed[upper].prepared.radii().min();
             let rf = placed[fore].prepared.radii().min();
             for (p, r) in [
