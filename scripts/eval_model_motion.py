@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from eval_model_poses import TORSO, random_pose  # noqa: E402
+from eval_model_poses import TORSO, random_pose, rendered  # noqa: E402
 
 
 def random_motion(
@@ -119,10 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         errors = []
         searched = 0
         for pose in poses:
-            depth, labels = model.render_depth(pose, camera)
-            mask = labels >= 0
-            noise = rng.normal(0.0, args.noise / 1000, depth.shape)
-            depth = np.where(mask, depth + noise, 0.0).astype(np.float32)
+            depth, mask = rendered(model, pose, camera, rng, args.noise)
             truth = np.asarray(model.joints(pose))
             try:
                 res = tracker.update(depth, None if args.no_mask else mask)

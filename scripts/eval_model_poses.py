@@ -69,6 +69,21 @@ def random_pose(
     return np.asarray(model.clamp_pose(pose)), float(np.degrees(yaw)), raised
 
 
+def rendered(
+    model: dp.BodyModel,
+    pose: np.ndarray,
+    camera: dp.Camera,
+    rng: np.random.Generator,
+    noise_mm: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The depth (metres, Gaussian noise of `noise_mm` added, 0 off the body) and the
+    mask of `model` rendered at `pose`."""
+    depth, labels = model.render_depth(pose, camera)
+    mask = labels >= 0
+    noise = rng.normal(0.0, noise_mm / 1000, depth.shape)
+    return np.where(mask, depth + noise, 0.0).astype(np.float32), mask
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--poses", type=int, default=100)
@@ -87,10 +102,7 @@ def main(argv: list[str] | None = None) -> int:
         height = round(float(rng.uniform(1.55, 1.95)), 2)
         model = dp.BodyModel(height=height)
         pose, yaw, raised = random_pose(rng, model, np.radians(args.pitch))
-        depth, labels = model.render_depth(pose, camera)
-        mask = labels >= 0
-        noise = rng.normal(0.0, args.noise / 1000, depth.shape)
-        depth = np.where(mask, depth + noise, 0.0).astype(np.float32)
+        depth, mask = rendered(model, pose, camera, rng, args.noise)
         res = estimator.estimate(depth, None if args.no_mask else mask)
         errors = np.linalg.norm(res.joints - np.asarray(model.joints(pose)), axis=1)
         rows.append(
