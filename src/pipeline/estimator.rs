@@ -10,6 +10,7 @@ use super::orientation::{
 };
 use super::resolution::WorkingResolution;
 use super::result::{Clock, PoseResult, SegmentSummary, Source};
+use super::size::SizedFit;
 use crate::body::{BodyModel, Pose};
 use crate::camera::Camera;
 use crate::cloud::DepthView;
@@ -170,13 +171,7 @@ impl Estimator {
         let mut frame = self.prepare(depth, mask, None)?;
         clock.lap("foreground");
         let sized = self.fit_from_scratch(&mut frame, &mut clock, self.size_search())?;
-        let fitted = Fitted {
-            fit: sized.fit,
-            discrepancy: sized.score,
-            model: &sized.model,
-            rendered: None,
-        };
-        Ok(self.result(&mut frame, fitted, Source::Templates, clock))
+        Ok(self.sized_result(&mut frame, sized, clock).0)
     }
 
     /// The frame at the working resolution with the person's pixels: `mask` (the
@@ -550,6 +545,27 @@ impl Estimator {
         }
         let problem = self.problem(frame, &config)?;
         problem.label_all(model, &fit, None)
+    }
+
+    /// The [`Self::result`] of a fit from scratch (its source the templates) and the
+    /// body it was made with.
+    pub(crate) fn sized_result(
+        &self,
+        frame: &mut Frame,
+        sized: SizedFit,
+        clock: Clock,
+    ) -> (PoseResult, BodyModel) {
+        let SizedFit {
+            fit, score, model, ..
+        } = sized;
+        let fitted = Fitted {
+            fit,
+            discrepancy: score,
+            model: &model,
+            rendered: None,
+        };
+        let res = self.result(frame, fitted, Source::Templates, clock);
+        (res, model)
     }
 
     /// The result of a frame: the fit's pose, its labels and the person's pixels at the

@@ -20,11 +20,11 @@
 //! provisional: a later frame still explained badly (the 2nd, 3rd, 5th, 9th, ...: a few
 //! searches, not one a frame) is read again from scratch with the size searched, and a
 //! reading that explains it well and ranks better replaces the track and its size. It
-//! then collects usable frames (any but a track's
-//! first whose fit explains enough of the person) and, once it has enough, fits the
-//! body shape to them all together ([`crate::fit::fit_shape`]), starting from the sized
-//! body; it tracks with that shape from then on. A calibration that fails leaves the
-//! shape as it was and is not retried.
+//! then collects usable frames (any but a track's first whose fit explains enough of
+//! the person) and, once it has enough, fits the body shape to them all together
+//! ([`crate::fit::fit_shape`]), starting from the sized body; it tracks with that shape
+//! from then on. A calibration that fails leaves the shape as it was and is not
+//! retried.
 //!
 //! **Learned background.** With `learn_background` and no background frame, every frame
 //! whose fit explains the person teaches a [`BackgroundModel`] the scene's static depth
@@ -208,17 +208,11 @@ impl Tracker {
                 clock.lap("foreground");
                 let search_size = self.size.is_none() && est.size_search();
                 let sized = est.fit_from_scratch(&mut frame, &mut clock, search_size)?;
-                let fitted = Fitted {
-                    fit: sized.fit,
-                    discrepancy: sized.score,
-                    model: &sized.model,
-                    rendered: None,
-                };
-                let res = est.result(&mut frame, fitted, Source::Templates, clock);
+                let scale = sized.scale;
+                let (res, model) = est.sized_result(&mut frame, sized, clock);
                 if search_size {
-                    self.size = Some(sized.scale);
-                    self.size_provisional = est.explains_badly(&frame, sized.score);
-                    self.estimator.set_model(sized.model);
+                    let provisional = est.explains_badly(&frame, res.discrepancy);
+                    self.take_size(model, scale, provisional);
                 }
                 (res, frame, true)
             }
@@ -398,20 +392,21 @@ impl Tracker {
         if !better || est.explains_badly(&frame, sized.score) {
             return Ok((res, frame, switched));
         }
-        let fitted = Fitted {
-            fit: sized.fit,
-            discrepancy: sized.score,
-            model: &sized.model,
-            rendered: None,
-        };
-        let mut new = est.result(&mut frame, fitted, Source::Templates, Clock::start());
+        let scale = sized.scale;
+        let (mut new, model) = est.sized_result(&mut frame, sized, Clock::start());
         new.timings.add(&res.timings);
-        self.size_provisional = false;
-        self.size = Some(sized.scale);
-        self.estimator.set_model(sized.model);
-        // The frames kept, or the shape fitted, belong to the old size.
-        self.calibration = Calibration::default();
+        self.take_size(model, scale, false);
         Ok((new, frame, true))
+    }
+
+    /// Tracks with `model`, the base model at `scale`, from now on (`provisional`: see
+    /// [`Tracker::resized`]). Frames kept for the shape calibration, or a shape fitted,
+    /// belong to another size: the calibration starts again.
+    fn take_size(&mut self, model: BodyModel, scale: f64, provisional: bool) {
+        self.size = Some(scale);
+        self.size_provisional = provisional;
+        self.estimator.set_model(model);
+        self.calibration = Calibration::default();
     }
 
     /// The previous pose moved on by the damped velocity, within the joint limits.
@@ -570,8 +565,8 @@ fn error_text(e: &Error) -> String {
 #[cfg(test)]
 mod tests {
     use super::super::tests::{
-        default_templates, mean_joint_error_of, room_posed, room_with_body, walking,
-        with_depth_noise,
+        default_templates, mean_joint_error_of, rendered_person, room_posed, room_with_body,
+        walking, with_depth_noise,
     };
     use super::*;
     use crate::camera::Camera;
@@ -634,8 +629,7 @@ mod tests {
         };
         let camera = Camera::itop();
         let seen = |pose: &Pose, seed: u64| {
-            let (depth, _) = model.render_depth(pose, &camera);
-            let mask: Vec<bool> = depth.iter().map(|&z| z > 0.0).collect();
+            let (depth, mask) = rendered_person(&model, pose, &camera);
             (with_depth_noise(&depth, &noise, seed), mask)
         };
         let (depth, mask) = seen(&first, 1);
