@@ -1,10 +1,10 @@
 //! The pose of a frame with nothing known: the template search, then the limb poses
-//! ([`super::limbs`]), the turns ([`super::turns`]: the half turn always, every eighth
-//! of a turn for a badly explained fit), then the body's size ([`super::size`]), whose
-//! search runs the turns again when it changes the body. When the search looked at
-//! more than one first view (a leaning or lying silhouette) and its fit explains the
-//! depth badly, each first view is also searched alone, with its own limb poses and
-//! turns (`Estimator::searched_per_view`).
+//! ([`super::limbs`]), the turns ([`super::turns`]: the half turn and the left/right
+//! exchanges always, every eighth of a turn for a badly explained fit), then the body's
+//! size ([`super::size`]), whose search runs the turns again when it changes the body.
+//! When the search looked at more than one first view (a leaning or lying silhouette)
+//! and its fit explains the depth badly, each first view is also searched alone, with
+//! its own limb poses and turns (`Estimator::searched_per_view`).
 //! `Estimator::estimate` and a track's first frame both run it.
 //!
 //! A result that explains the depth badly ([`Estimator::explains_badly`]: what the

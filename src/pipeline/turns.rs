@@ -7,12 +7,17 @@
 //! as its far side. Front and back are resolved explicitly: every fit is also tried
 //! turned half a turn about its own vertical axis, with its limbs as fitted and
 //! exchanged, since a body and the same body facing the other way draw about mirrored
-//! silhouettes that the search's starts hardly tell apart. When a fit explains the
-//! depth badly ([`Estimator::explains_badly`]), it is turned by every other eighth of a
-//! turn as well, and also tried with only its arms and only its legs exchanged (a
-//! raised arm read as the other one). Each gets a short EM, also from the start
-//! recentred on the observed points (a turned body shows the camera its other side),
-//! and the refit that ranks best replaces the fit when it ranks better. From scratch the
+//! silhouettes that the search's starts hardly tell apart. Left and right are resolved
+//! explicitly too: every fit is also tried with its limbs exchanged where it stands,
+//! all of them, only the arms and only the legs ([`exchanges`]): in a side view the
+//! near and far limbs draw about the same silhouette, and a raised arm is easily read
+//! as the other one. When a fit explains the depth badly
+//! ([`Estimator::explains_badly`]), it is turned by every other eighth of a turn as
+//! well. Each turned start gets a short EM, also from the start recentred on the
+//! observed points (a turned body shows the camera its other side); an exchange at the
+//! same turn shows the camera the same side and gets its short EM as it is (but for a
+//! fit explaining the depth badly, which may stand off the body). The refit that ranks
+//! best replaces the fit when it ranks better. From scratch the
 //! turns run before the body's size is searched; when the size search changes the
 //! body, they run again with the sized body (`Estimator::turned_at_size`): a subject
 //! far from the model's size may be read the wrong way round at the model's size only.
@@ -28,21 +33,25 @@ use crate::fit::start::limbs_swapped;
 use crate::fit::{FitConfig, FitResult};
 use std::f64::consts::FRAC_PI_4;
 
-/// `pose` turned about its own vertical axis by every eighth of a turn, each with its
-/// limbs as they are and exchanged ([`swap_limbs`]), but for `pose` itself; then `pose`
-/// with only its arms and with only its legs exchanged ([`limbs_swapped`]): 17 poses.
+/// `pose` turned about its own vertical axis by every eighth of a turn but none, each
+/// with its limbs as they are and exchanged ([`swap_limbs`]): 14 poses.
 pub fn turned_starts(pose: &Pose) -> Vec<Pose> {
-    (0..8)
+    (1..8)
         .flat_map(|k| {
             let t = turned(pose, k as f64 * FRAC_PI_4);
             [t, swap_limbs(&t)]
         })
-        .skip(1)
-        .chain([
-            limbs_swapped(pose, false, true),
-            limbs_swapped(pose, true, false),
-        ])
         .collect()
+}
+
+/// `pose` with its limbs exchanged where it stands: all of them ([`swap_limbs`]), only
+/// the arms and only the legs ([`limbs_swapped`]).
+pub fn exchanges(pose: &Pose) -> [Pose; 3] {
+    [
+        swap_limbs(pose),
+        limbs_swapped(pose, false, true),
+        limbs_swapped(pose, true, false),
+    ]
 }
 
 /// `pose` turned half a turn about its own vertical axis ([`turn_around`]), with its
@@ -54,9 +63,9 @@ pub fn half_turns(pose: &Pose) -> [Pose; 2] {
 }
 
 impl Estimator {
-    /// `fit` (with `score`, its depth discrepancy) or the best of its turned refits where
-    /// that ranks better: half a turn always, every eighth of a turn when it explains
-    /// the depth badly (see the module docs).
+    /// `fit` (with `score`, its depth discrepancy) or the best of its turned and
+    /// exchanged refits where that ranks better: half a turn and the exchanges always,
+    /// every eighth of a turn when it explains the depth badly (see the module docs).
     /// Returns the fit kept and its discrepancy.
     pub(crate) fn try_turns(
         &self,
@@ -95,27 +104,32 @@ impl Estimator {
         )
     }
 
-    /// The best-ranked of the turned refits of `pose` (with `score`, its depth
-    /// discrepancy) and its discrepancy, when it ranks better than `pose`.
+    /// The best-ranked of the turned and exchanged refits of `pose` (with `score`, its
+    /// depth discrepancy) and its discrepancy, when it ranks better than `pose`.
     pub(crate) fn better_turn(
         &self,
         frame: &mut Frame,
         pose: &Pose,
         score: f64,
     ) -> Result<Option<(FitResult, f64)>> {
-        let starts = if self.explains_badly(frame, score) {
-            turned_starts(pose)
-        } else {
-            half_turns(pose).to_vec()
-        };
+        let short = self.config().short_refit();
         // A turned body shows the camera its other side, whose visible surface lies
-        // elsewhere: each start is also tried recentred on the observed points, like
-        // the search's.
-        let config = FitConfig {
-            recentred_start: true,
-            ..self.config().short_refit()
+        // elsewhere: each turned start is also tried recentred on the observed points,
+        // like the search's. An exchange at the same turn shows the same side, but for
+        // a fit explaining the depth badly, which may stand off the body too.
+        let (turns, exchanged) = if self.explains_badly(frame, score) {
+            let mut all = turned_starts(pose);
+            all.extend(exchanges(pose));
+            (all, Vec::new())
+        } else {
+            (half_turns(pose).to_vec(), exchanges(pose).to_vec())
         };
-        let fits = self.fits(frame, &config, &starts, None, None)?;
+        let recentred = FitConfig {
+            recentred_start: true,
+            ..short
+        };
+        let mut fits = self.fits(frame, &recentred, &turns, None, None)?;
+        fits.extend(self.fits(frame, &short, &exchanged, None, None)?);
         let (best, best_score, best_rank) = self.best_ranked(frame, fits)?;
         Ok((best_rank < self.rank(score, pose)).then_some((best, best_score)))
     }
@@ -129,21 +143,18 @@ mod tests {
     use crate::pipeline::tests::{estimator, mean_joint_distance, rendered_person, walking};
     use crate::pipeline::PipelineConfig;
     use nalgebra::Vector3;
+    use std::f64::consts::FRAC_PI_2;
 
     #[test]
     fn turned_starts_are_the_other_eighths_of_a_turn_with_limbs_as_they_are_and_exchanged() {
         let pose = turned(&walking(&BodyModel::default(), 0.7), 0.3);
         let starts = turned_starts(&pose);
-        assert_eq!(starts.len(), 17);
-        assert_eq!(starts[15], limbs_swapped(&pose, false, true));
-        assert_eq!(starts[16], limbs_swapped(&pose, true, false));
-        assert_eq!(starts[7..9], half_turns(&pose));
+        assert_eq!(starts.len(), 14);
+        assert_eq!(starts[6..8], half_turns(&pose));
         let r = root_rotation(&pose);
-        // Entry j of (turn k, limbs exchanged) in order is (j / 2, j odd); entry 0, the
-        // pose itself, is left out.
-        for (i, s) in starts[..15].iter().enumerate() {
-            let j = i + 1;
-            let (k, swapped) = (j / 2, j % 2 == 1);
+        // Entry i of (turn k, limbs exchanged) in order is (i / 2 + 1, i odd).
+        for (i, s) in starts.iter().enumerate() {
+            let (k, swapped) = (i / 2 + 1, i % 2 == 1);
             // The turn relative to the body is about its own vertical axis.
             let rel = r.inverse() * root_rotation(s);
             let expected =
@@ -153,6 +164,27 @@ mod tests {
             let limbs = if swapped { swap_limbs(&pose) } else { pose };
             assert_eq!(&s[6..], &limbs[6..], "start {i}");
         }
+    }
+
+    #[test]
+    fn exchanges_keep_the_root_and_exchange_all_limbs_the_arms_or_the_legs() {
+        let mut pose = turned(&walking(&BodyModel::default(), 0.7), 0.3);
+        pose[param::R_ELBOW] = 1.1;
+        let [all, arms, legs] = exchanges(&pose);
+        assert_eq!(all, swap_limbs(&pose));
+        for s in [all, arms, legs] {
+            assert_eq!(&s[..6], &pose[..6], "the root stays");
+        }
+        let (r_arm, l_arm, r_leg, l_leg) = (
+            param::R_SHOULDER,
+            param::L_SHOULDER,
+            param::R_HIP,
+            param::L_HIP,
+        );
+        assert_eq!(arms[r_arm..r_arm + 4], pose[l_arm..l_arm + 4]);
+        assert_eq!(arms[r_leg..r_leg + 3], pose[r_leg..r_leg + 3]);
+        assert_eq!(legs[r_arm..r_arm + 4], pose[r_arm..r_arm + 4]);
+        assert_eq!(legs[r_leg..r_leg + 3], pose[l_leg..l_leg + 3]);
     }
 
     /// A walker seen obliquely.
@@ -241,6 +273,43 @@ mod tests {
                 assert!(turned_score < score, "{turned_score} against {score}");
                 assert!(after < 0.06, "elbow {elbow}: mean joint error {after}");
             });
+        }
+    }
+
+    #[test]
+    fn a_side_view_with_its_arms_exchanged_is_exchanged_back() {
+        // A walker seen from its side at several turns and steps, the right arm raised
+        // forward, read with its arms exchanged: the raised arm drawn on the far side.
+        // That reading explains the depth fairly (not badly, so no turn but the half
+        // turn runs); the exchanges find the body.
+        let model = BodyModel::default();
+        let camera = Camera::itop();
+        let est = estimator(&camera, PipelineConfig::default());
+        for yaw in [1.2, FRAC_PI_2, 2.0] {
+            for t in [0.3, 0.9] {
+                let mut pose = turned(&walking(&model, t), yaw);
+                pose[param::R_SHOULDER] = 0.9;
+                pose[param::R_ELBOW] = 0.8;
+                let wrong = limbs_swapped(&pose, false, true);
+                let (depth, mask) = rendered_person(&model, &pose, &camera);
+                let error = |p: &Pose| mean_joint_distance(&model.joints(p), &model.joints(&pose));
+                crate::pool::on_worker(|| {
+                    let mut frame = est.prepare(&depth, Some(&mask), None).unwrap();
+                    let score = est.discrepancy(&frame, &wrong).0;
+                    assert!(!est.explains_badly(&frame, score), "discrepancy {score}");
+                    assert!(error(&wrong) > 0.07, "error {}", error(&wrong));
+                    let (fit, fit_score) = est
+                        .better_turn(&mut frame, &wrong, score)
+                        .unwrap()
+                        .expect("a refit ranks better");
+                    assert!(
+                        fit_score < 0.05,
+                        "yaw {yaw}, step {t}: discrepancy {fit_score}"
+                    );
+                    let e = error(&fit.pose);
+                    assert!(e < 0.005, "yaw {yaw}, step {t}: mean joint error {e}");
+                });
+            }
         }
     }
 
