@@ -49,14 +49,16 @@ def fit_shape(
     *,
     model: BodyModel | None = None,
     masks: np.ndarray | Sequence[np.ndarray] | None = None,
-    iterations: int = 3,
+    iterations: int | None = None,
     config: None | FitConfig | Mapping[str, Any] = None,
-    lm_iterations: int = 20,
-    prior_weight: float = 1e5,
-    bounds: tuple[float, float] = (0.7, 1.4),
+    lm_iterations: int | None = None,
+    prior_weight: float | None = None,
+    bounds: tuple[float, float] | None = None,
 ) -> ShapeFitResult:
     """Calibrate the body shape of `model` (default `BodyModel()`) on a few frames.
 
+    `BodyModel.fit_shape` of the base model, whose documentation holds the options and
+    their defaults (an option left at None takes its default there).
     `depths`: (F, H, W) or a list of (H, W) depth images (float metres or uint16 mm);
     `poses`: (F, 22) initial poses (e.g. the tracker's or `fit_pose`'s on those frames);
     `masks`: optional (F, H, W) person masks. Alternates per-frame pose/label fits with a
@@ -68,14 +70,11 @@ def fit_shape(
     if model is not None and not isinstance(model, BodyModel):
         raise InvalidTypeError(f"model: expected a depthpose.BodyModel, got {type(model).__name__}")
     base = BodyModel() if model is None else model
-    return base.fit_shape(
-        depths,
-        camera,
-        poses,
-        masks=masks,
-        iterations=iterations,
-        config=config,
-        lm_iterations=lm_iterations,
-        prior_weight=prior_weight,
-        bounds=bounds,
-    )
+    given = {
+        "iterations": iterations,
+        "lm_iterations": lm_iterations,
+        "prior_weight": prior_weight,
+        "bounds": bounds,
+    }
+    options: dict[str, Any] = {k: v for k, v in given.items() if v is not None}
+    return base.fit_shape(depths, camera, poses, masks=masks, config=config, **options)
