@@ -34,7 +34,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from eval_model_poses import TORSO, random_pose, rendered  # noqa: E402
+from eval_model_poses import TORSO, add_rendering_options, random_pose, rendered  # noqa: E402
 
 
 def random_motion(
@@ -98,11 +98,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--spin", type=float, default=12.0, help="largest turn (degrees/frame)")
     ap.add_argument("--flip-every", type=int, default=3, help="every N-th sequence flips")
     ap.add_argument("--flip-frames", type=int, default=30, help="frames of a whole flip")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--noise", type=float, default=5.0, help="depth noise sigma (mm)")
-    ap.add_argument("--no-mask", action="store_true", help="segment the person automatically")
     ap.add_argument("--config", default=None, help="PipelineConfig fields as JSON")
-    ap.add_argument("--json-out", type=Path)
+    add_rendering_options(ap)
     args = ap.parse_args(argv)
 
     rng = np.random.default_rng(args.seed)

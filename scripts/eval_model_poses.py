@@ -84,14 +84,21 @@ def rendered(
     return np.where(mask, depth + noise, 0.0).astype(np.float32), mask
 
 
+def add_rendering_options(ap: argparse.ArgumentParser) -> None:
+    """The options of every probe that renders the body model: the random generator's
+    seed, the depth noise of `rendered`, whether the estimator gets the mask, and the
+    JSON output."""
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--noise", type=float, default=5.0, help="depth noise sigma (mm)")
+    ap.add_argument("--no-mask", action="store_true", help="segment the person automatically")
+    ap.add_argument("--json-out", type=Path)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--poses", type=int, default=100)
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--noise", type=float, default=5.0, help="depth noise sigma (mm)")
     ap.add_argument("--pitch", type=float, default=0.0, help="camera pitch (degrees)")
-    ap.add_argument("--no-mask", action="store_true", help="segment the person automatically")
-    ap.add_argument("--json-out", type=Path)
+    add_rendering_options(ap)
     args = ap.parse_args(argv)
 
     rng = np.random.default_rng(args.seed)
