@@ -256,6 +256,22 @@ def test_an_arm_raised_overhead_is_read_on_an_upright_body_from_scratch(template
     assert j[0, 1] < min(j[2, 1], j[3, 1]) < j[8, 1]  # head, shoulders, torso (y down)
 
 
+def test_forearms_pointing_at_the_camera_are_read_in_front_of_the_body_from_scratch(templates):
+    # Real frame 7: upper arms out and down, forearms pointing at the camera. The search
+    # reads the body facing away with both arms raised forward behind its back, hidden
+    # (discrepancy about 0.43, the hands half a metre behind the shoulders). Turned half
+    # a turn as it is, the arms stand in front of the chest and the short refit leaves
+    # them there; with the hidden arms re-posed before the refit, the body faces the
+    # camera with both hands in front of it.
+    files = sorted(shared("real_depth", "skeltrack").glob("*.u16"))
+    est = PoseEstimator(dp.Camera.kinect_v1(), templates=templates)
+    res = est.estimate(dp.read_depth(files[7]))
+    j = res.joints
+    assert res.discrepancy < 0.42, res.discrepancy
+    assert j[3, 0] > j[2, 0]  # facing the camera: the left shoulder on the image's right
+    assert max(j[6, 2], j[7, 2]) < min(j[2, 2], j[3, 2]) - 0.2  # hands nearer the camera
+
+
 def test_a_body_read_facing_away_is_turned_to_face_the_camera_from_scratch(templates):
     # Frame 11 of the 1.90 m subject's front hop: the search's best reading faces away
     # with the limbs crossed. Its half turn shows the camera the body's other side, so

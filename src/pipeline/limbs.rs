@@ -12,7 +12,7 @@
 //! pose, and from the best-ranked other poses scored (see [`REFITTED_STARTS`]).
 
 use super::estimator::{Estimator, Frame};
-use crate::body::{param, Pose};
+use crate::body::{param, seg, Pose, NUM_SEGMENTS};
 use crate::error::Result;
 use crate::fit::FitResult;
 
@@ -60,6 +60,25 @@ pub(crate) const LIMBS: [(usize, bool); 4] = [
     (param::R_HIP, false),
     (param::L_HIP, false),
 ];
+
+/// The body segments of each limb of [`LIMBS`], in its order: the limb's root segment
+/// (upper arm, thigh), then its end (forearm and hand, shin and foot).
+pub(crate) const LIMB_SEGMENTS: [[usize; 3]; 4] = [
+    [seg::R_UPPER_ARM, seg::R_FOREARM, seg::R_HAND],
+    [seg::L_UPPER_ARM, seg::L_FOREARM, seg::L_HAND],
+    [seg::R_THIGH, seg::R_SHIN, seg::R_FOOT],
+    [seg::L_THIGH, seg::L_SHIN, seg::L_FOOT],
+];
+
+/// The limbs of [`LIMBS`] whose end (forearm and hand, shin and foot) explains no point
+/// of a fit with `part_counts` (the points labelled with each segment): the depth holds
+/// nothing of where they are, so their angles are the start's and the rest-pose
+/// penalty's.
+pub(crate) fn unseen_limbs(part_counts: &[usize; NUM_SEGMENTS]) -> Vec<usize> {
+    (0..LIMBS.len())
+        .filter(|&k| LIMB_SEGMENTS[k][1..].iter().all(|&s| part_counts[s] == 0))
+        .collect()
+}
 
 /// `pose` with the limb whose angles start at `first` set to `angles`.
 fn with_limb(pose: &Pose, first: usize, angles: &[f64]) -> Pose {
@@ -259,6 +278,24 @@ mod tests {
             mean_joint_error_of(&model, &b, &pose),
         );
         assert!(ea < 0.05 && ea <= eb, "with limb poses {ea}, without {eb}");
+    }
+
+    #[test]
+    fn a_limb_is_unseen_when_its_end_explains_no_point() {
+        let mut counts = [10; NUM_SEGMENTS];
+        assert!(unseen_limbs(&counts).is_empty());
+        // The right forearm and hand explain nothing; the left hand alone neither.
+        counts[seg::R_FOREARM] = 0;
+        counts[seg::R_HAND] = 0;
+        counts[seg::L_HAND] = 0;
+        assert_eq!(unseen_limbs(&counts), [0]);
+        // Upper arms and thighs do not count: both legs' ends explain nothing.
+        for s in [seg::R_SHIN, seg::R_FOOT, seg::L_SHIN, seg::L_FOOT] {
+            counts[s] = 0;
+        }
+        counts[seg::R_UPPER_ARM] = 0;
+        assert_eq!(unseen_limbs(&counts), [0, 2, 3]);
+        assert_eq!(unseen_limbs(&[0; NUM_SEGMENTS]), [0, 1, 2, 3]);
     }
 
     #[test]

@@ -20,19 +20,11 @@
 //! replaces was off the person anyway.) Limbs that lie on the person are never moved.
 
 use super::estimator::{Estimator, Frame, DISCREPANCY_CAP};
-use super::limbs::{LimbSearch, LIMBS};
-use crate::body::{seg, Pose, NUM_SEGMENTS};
+use super::limbs::{LimbSearch, LIMBS, LIMB_SEGMENTS};
+use crate::body::{Pose, NUM_SEGMENTS};
 use crate::error::Result;
 use crate::fit::FitResult;
 use crate::render::BACKGROUND_LABEL;
-
-/// The body segments of each limb of [`LIMBS`], in its order.
-const LIMB_SEGMENTS: [[usize; 3]; 4] = [
-    [seg::R_UPPER_ARM, seg::R_FOREARM, seg::R_HAND],
-    [seg::L_UPPER_ARM, seg::L_FOREARM, seg::L_HAND],
-    [seg::R_THIGH, seg::R_SHIN, seg::R_FOOT],
-    [seg::L_THIGH, seg::L_SHIN, seg::L_FOOT],
-];
 
 /// The limb of each body segment (an index into [`LIMBS`]); `usize::MAX` for the head,
 /// neck, torso and pelvis.

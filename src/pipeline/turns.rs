@@ -16,8 +16,15 @@
 //! well. Each turned start gets a short EM, also from the start recentred on the
 //! observed points (a turned body shows the camera its other side); an exchange at the
 //! same turn shows the camera the same side and gets its short EM as it is (but for a
-//! fit explaining the depth badly, which may stand off the body). The refit that ranks
-//! best replaces the fit when it ranks better. From scratch the
+//! fit explaining the depth badly, which may stand off the body). A limb whose end
+//! explains no point of the fit ([`unseen_limbs`]: an arm hidden behind the body) was
+//! placed by the start and the rest-pose penalty, not by the depth; turned half a turn
+//! it stands in front of the body, where the depth contradicts it and the short EM
+//! rarely moves it far enough. So the half turn (limbs as they are) is moved onto the
+//! observed body and its unseen limbs take their best-ranked poses of
+//! [`super::limbs`] before its refit: a body facing the camera with its forearms
+//! pointing at it, read facing away with the arms hidden behind the back, is found so.
+//! The refit that ranks best replaces the fit when it ranks better. From scratch the
 //! turns run before the body's size is searched; when the size search changes the
 //! body, they run again with the sized body (`Estimator::turned_at_size`): a subject
 //! far from the model's size may be read the wrong way round at the model's size only.
@@ -26,6 +33,7 @@
 
 use super::estimator::{Estimator, Frame};
 use super::hypotheses::{swap_limbs, turn_around, turned};
+use super::limbs::{best_limbs, unseen_limbs, LimbSearch};
 use super::size::SizedFit;
 use crate::body::Pose;
 use crate::error::Result;
@@ -73,8 +81,9 @@ impl Estimator {
         fit: FitResult,
         score: f64,
     ) -> Result<(FitResult, f64)> {
+        let unseen = unseen_limbs(&fit.part_counts);
         Ok(self
-            .better_turn(frame, &fit.pose, score)?
+            .better_turn(frame, &fit.pose, score, &unseen)?
             .unwrap_or((fit, score)))
     }
 
@@ -92,8 +101,9 @@ impl Estimator {
         }
         let mut at_size = self.clone();
         at_size.set_model(sized.model.clone());
+        let unseen = unseen_limbs(&sized.fit.part_counts);
         Ok(
-            match at_size.better_turn(frame, &sized.fit.pose, sized.score)? {
+            match at_size.better_turn(frame, &sized.fit.pose, sized.score, &unseen)? {
                 Some((fit, score)) => SizedFit {
                     fit,
                     score,
@@ -105,12 +115,14 @@ impl Estimator {
     }
 
     /// The best-ranked of the turned and exchanged refits of `pose` (with `score`, its
-    /// depth discrepancy) and its discrepancy, when it ranks better than `pose`.
+    /// depth discrepancy, and `unseen`, the limbs its fit leaves unseen:
+    /// [`unseen_limbs`]) and its discrepancy, when it ranks better than `pose`.
     pub(crate) fn better_turn(
         &self,
         frame: &mut Frame,
         pose: &Pose,
         score: f64,
+        unseen: &[usize],
     ) -> Result<Option<(FitResult, f64)>> {
         let short = self.config().short_refit();
         // A turned body shows the camera its other side, whose visible surface lies
@@ -122,7 +134,9 @@ impl Estimator {
             all.extend(exchanges(pose));
             (all, Vec::new())
         } else {
-            (half_turns(pose).to_vec(), exchanges(pose).to_vec())
+            let mut halves = half_turns(pose);
+            halves[0] = self.reposed_turn(frame, &short, halves[0], unseen)?;
+            (halves.to_vec(), exchanges(pose).to_vec())
         };
         let recentred = FitConfig {
             recentred_start: true,
@@ -132,6 +146,33 @@ impl Estimator {
         fits.extend(self.fits(frame, &short, &exchanged, None, None)?);
         let (best, best_score, best_rank) = self.best_ranked(frame, fits)?;
         Ok((best_rank < self.rank(score, pose)).then_some((best, best_score)))
+    }
+
+    /// `turned`, a fit's half turn, moved onto the observed body where that explains
+    /// the depth better and with the fit's `unseen` limbs set to their best-ranked poses
+    /// ([`best_limbs`]) when any ranks better than the limbs as they are; `turned`
+    /// itself otherwise (and without `limb_poses`).
+    fn reposed_turn(
+        &self,
+        frame: &mut Frame,
+        config: &FitConfig,
+        turned: Pose,
+        unseen: &[usize],
+    ) -> Result<Pose> {
+        if unseen.is_empty() || !self.config().limb_poses {
+            return Ok(turned);
+        }
+        let placed = self.better_placed(frame, config, vec![turned])?[0];
+        let current = self.rankings(&self.discrepancies(frame, &[placed])?, &[placed])[0];
+        let search = LimbSearch {
+            limbs: unseen,
+            mirrored: false,
+            margin: 0.0,
+        };
+        let found = best_limbs(&placed, current, &search, |poses| {
+            Ok(self.rankings(&self.discrepancies(frame, poses)?, poses))
+        })?;
+        Ok(if found.changed { found.pose } else { turned })
     }
 }
 
@@ -299,7 +340,7 @@ mod tests {
                     assert!(!est.explains_badly(&frame, score), "discrepancy {score}");
                     assert!(error(&wrong) > 0.07, "error {}", error(&wrong));
                     let (fit, fit_score) = est
-                        .better_turn(&mut frame, &wrong, score)
+                        .better_turn(&mut frame, &wrong, score, &[])
                         .unwrap()
                         .expect("a refit ranks better");
                     assert!(
