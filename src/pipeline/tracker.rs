@@ -7,9 +7,11 @@
 //! readings with left and right exchanged — whole body, legs only, arms only — among
 //! the starts) and keeps its best. Its search refits `lost_hypotheses` templates; when
 //! its best still explains the depth badly, the frame may be a cut to an unrelated
-//! scene, and the search runs again with as many as from scratch (`hypotheses`). A lost
-//! frame's body that still draws a limb off the person has that limb re-initialised
-//! ([`super::lost_limbs`]). With `recheck_every` set, the search also runs every that
+//! scene, and the search runs again with as many as from scratch (`hypotheses`). The
+//! best is then turned as a fit from scratch is ([`super::turns`]): the half turn and
+//! the left/right exchanges, and every eighth of a turn when it explains the depth
+//! badly. A lost frame's body that still draws a limb off the person has that limb
+//! re-initialised ([`super::lost_limbs`]). With `recheck_every` set, the search also runs every that
 //! many tracked frames, and the track switches when a hypothesis explains the depth
 //! clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
 //! as the stereo pipeline's) raises the absolute lost threshold by as much as its noise
@@ -328,6 +330,12 @@ impl Tracker {
                     (best, best_score) = (other, other_score);
                 }
             }
+        }
+        if lost {
+            // A lost frame has only the templates and the tracked pose to go on, as from
+            // scratch: its best is turned as a fit from scratch is, front and back and
+            // left and right resolved explicitly ([`super::turns`]).
+            (best, best_score) = est.try_turns(&mut frame, best, best_score)?;
         }
         let margin = if lost { 0.0 } else { cfg.switch_margin };
         let rank_best = est.rank(best_score, &best.pose);
@@ -665,17 +673,21 @@ mod tests {
 
     #[test]
     fn a_cut_the_lost_search_explains_badly_is_searched_as_from_scratch() {
-        // A walker facing the camera, then (a cut) a body seen obliquely from behind,
-        // an arm overhead and a knee raised. The lost search with one hypothesis leaves
+        // A walker facing the camera, then (a cut) a body seen from behind, the right
+        // arm overhead, the left pointing forward, the left knee raised and the right
+        // heel raised behind. The lost search with one hypothesis (and its turns) leaves
         // it explained badly; the search with the hypotheses of a search from scratch
         // finds it.
         let model = BodyModel::default();
         let front = walking(&model, 0.4);
         let mut cut = walking(&model, 1.5);
-        cut[param_root_yaw()] = 2.4;
+        cut[param_root_yaw()] = 3.0;
         cut[param::R_SHOULDER] = 2.9;
+        cut[param::L_SHOULDER] = 1.45;
         cut[param::L_HIP] = 1.4;
         cut[param::L_KNEE] = 1.6;
+        cut[param::R_HIP] = 0.0;
+        cut[param::R_KNEE] = 1.6;
         let run = |hypotheses: usize| {
             let config = PipelineConfig {
                 calibration_frames: 0,
