@@ -244,14 +244,19 @@ def test_lost_real_frames_are_turned_as_from_scratch(templates):
         assert j[3, 0] > j[2, 0], k  # facing the camera: the left shoulder on the right
 
 
+def _real_frame_from_scratch(k: int, templates):
+    """Real Kinect frame ``k`` (file order) estimated from scratch."""
+    files = sorted(shared("real_depth", "skeltrack").glob("*.u16"))
+    est = PoseEstimator(dp.Camera.kinect_v1(), templates=templates)
+    return est.estimate(dp.read_depth(files[k]))
+
+
 def test_an_arm_raised_aside_is_read_on_an_upright_body_from_scratch(templates):
     # Real frame 9: an arm raised out to the side tilts the silhouette's long axis, so
     # the search looks at three views (as it is, long axis upright, upside down). Ranked
     # together, the hypotheses of the others fill the budget; refining each view's best
     # finds the upright body that explains the depth well (without it: about 0.6).
-    files = sorted(shared("real_depth", "skeltrack").glob("*.u16"))
-    est = PoseEstimator(dp.Camera.kinect_v1(), templates=templates)
-    res = est.estimate(dp.read_depth(files[9]))
+    res = _real_frame_from_scratch(9, templates)
     j = res.joints
     assert res.discrepancy < 0.5, res.discrepancy
     assert j[0, 1] < min(j[2, 1], j[3, 1])  # head above the shoulders (y down)
@@ -263,9 +268,7 @@ def test_an_arm_raised_overhead_is_read_on_an_upright_body_from_scratch(template
     # (discrepancy about 0.59). Searched alone, the frame as it is has the whole budget,
     # its own limb poses and its own turns, which reach an upright reading that explains
     # the depth better (without the per-view search: head below the hips).
-    files = sorted(shared("real_depth", "skeltrack").glob("*.u16"))
-    est = PoseEstimator(dp.Camera.kinect_v1(), templates=templates)
-    res = est.estimate(dp.read_depth(files[6]))
+    res = _real_frame_from_scratch(6, templates)
     j = res.joints
     assert "views" in res.timings
     assert res.discrepancy < 0.5, res.discrepancy
@@ -279,9 +282,7 @@ def test_forearms_pointing_at_the_camera_are_read_in_front_of_the_body_from_scra
     # a turn as it is, the arms stand in front of the chest and the short refit leaves
     # them there; with the hidden arms re-posed before the refit, the body faces the
     # camera with both hands in front of it.
-    files = sorted(shared("real_depth", "skeltrack").glob("*.u16"))
-    est = PoseEstimator(dp.Camera.kinect_v1(), templates=templates)
-    res = est.estimate(dp.read_depth(files[7]))
+    res = _real_frame_from_scratch(7, templates)
     j = res.joints
     assert res.discrepancy < 0.42, res.discrepancy
     assert j[3, 0] > j[2, 0]  # facing the camera: the left shoulder on the image's right
