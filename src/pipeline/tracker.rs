@@ -11,9 +11,9 @@
 //! best is then turned as a fit from scratch is ([`super::turns`]): the half turn and
 //! the left/right exchanges, and every eighth of a turn when it explains the depth
 //! badly. A lost frame's body that still draws a limb off the person has that limb
-//! re-initialised ([`super::lost_limbs`]). With `recheck_every` set, the search also runs every that
-//! many tracked frames, and the track switches when a hypothesis explains the depth
-//! clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
+//! re-initialised ([`super::lost_limbs`]). With `recheck_every` set, the search also
+//! runs every that many tracked frames, and the track switches when a hypothesis
+//! explains the depth clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
 //! as the stereo pipeline's) raises the absolute lost threshold by as much as its noise
 //! raises the discrepancy of a body that fits as well as the model can.
 //!
