@@ -17,11 +17,11 @@
 //! observed points (a turned body shows the camera its other side); an exchange at the
 //! same turn shows the camera the same side and gets its short EM as it is (but for a
 //! fit explaining the depth badly, which may stand off the body). A limb whose end
-//! explains no point of the fit ([`unseen_limbs`]: an arm hidden behind the body) was
-//! placed by the start and the rest-pose penalty, not by the depth; turned half a turn
-//! it stands in front of the body, where the depth contradicts it and the short EM
-//! rarely moves it far enough. So the half turn (limbs as they are) is moved onto the
-//! observed body and its unseen limbs take their best-ranked poses of
+//! explains no point of the fit (`limbs::unseen_limbs`: an arm hidden behind the
+//! body) was placed by the start and the rest-pose penalty, not by the depth; turned
+//! half a turn it stands in front of the body, where the depth contradicts it and the
+//! short EM rarely moves it far enough. So the half turn (limbs as they are) is moved
+//! onto the observed body and its unseen limbs take their best-ranked poses of
 //! [`super::limbs`] before its refit: a body facing the camera with its forearms
 //! pointing at it, read facing away with the arms hidden behind the back, is found so.
 //! The refit that ranks best replaces the fit when it ranks better. From scratch the
