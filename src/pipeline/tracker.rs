@@ -13,9 +13,10 @@
 //! badly. A lost frame's body that still draws a limb off the person has that limb
 //! re-initialised ([`super::lost_limbs`]). With `recheck_every` set, the search also
 //! runs every that many tracked frames, and the track switches when a hypothesis
-//! explains the depth clearly better. A sensor whose depth noise is known ([`Tracker::set_depth_noise`],
-//! as the stereo pipeline's) raises the absolute lost threshold by as much as its noise
-//! raises the discrepancy of a body that fits as well as the model can.
+//! explains the depth clearly better. A sensor whose depth noise is known
+//! ([`Tracker::set_depth_noise`], as the stereo pipeline's) raises the absolute lost
+//! threshold by as much as its noise raises the discrepancy of a body that fits as well
+//! as the model can.
 //!
 //! **Size and shape.** Unless told the shape, the tracker finds the body's size on its
 //! first frame ([`super::size`]). A size found on a frame it explains badly is

@@ -20,7 +20,8 @@
 //! explains no point of the fit (`limbs::unseen_limbs`: an arm hidden behind the
 //! body) was placed by the start and the rest-pose penalty, not by the depth; turned
 //! half a turn it stands in front of the body, where the depth contradicts it and the
-//! short EM rarely moves it far enough. So the half turn (limbs as they are) is moved
+//! short EM rarely moves it far enough. So, where the half turn is the only turn (the
+//! fit does not explain the depth badly), the half turn (limbs as they are) is moved
 //! onto the observed body and its unseen limbs take their best-ranked poses of
 //! [`super::limbs`] before its refit: a body facing the camera with its forearms
 //! pointing at it, read facing away with the arms hidden behind the back, is found so.
